@@ -1,0 +1,26 @@
+# fourws: every target does its own set-up. See README.md.
+SHELL := /bin/bash
+.DEFAULT_GOAL := run
+ENV := source ros_ws/env.sh
+PYTEST_ARGS ?=
+OUT ?= runs/paper
+
+.PHONY: setup run test lint bench clean
+
+setup:
+	@bash tools/setup.sh
+
+run: setup
+	@$(ENV) && fourws paper --out $(OUT) --force
+
+lint: setup
+	@$(ENV) && ruff check .
+
+test: setup
+	@$(ENV) && echo "[test] ruff" && ruff check . && echo "[test] pytest" && python -m pytest $(PYTEST_ARGS)
+
+bench: setup
+	@$(ENV) && mkdir -p bench && python bench/run_all.py bench/results.json
+
+clean:
+	rm -rf ros_ws/build ros_ws/install ros_ws/log

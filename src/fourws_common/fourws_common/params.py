@@ -1,0 +1,124 @@
+"""Typed, ranged configuration fields for frozen dataclasses (pure Python, no ROS).
+
+Every core's configuration is a frozen dataclass whose fields are declared with
+:func:`param`: the metadata carries the allowed closed range, the unit and a one-line
+description. Nodes turn the same metadata into ROS parameter descriptors with ranges
+(``fourws_common.ros_params``), so a value is checked by one rule whether it comes from
+YAML, the command line or a runtime ``set_parameters`` call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+def param(
+    default: Any,
+    description: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    unit: str = "",
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A dataclass field with range/choice metadata. Lists are stored as tuples."""
+    meta = {"description": description, "lo": lo, "hi": hi, "unit": unit, "choices": choices}
+    if isinstance(default, list):
+        default = tuple(default)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def check_field(cls: type, name: str, value: Any) -> Any:
+    """Check one value against a field's type, range and choices; return it converted.
+
+    Raises ``ValueError`` naming the field and the rule it breaks.
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    if name not in fields:
+        raise ValueError(f"{cls.__name__}: unknown parameter '{name}'")
+    f = fields[name]
+    meta = f.metadata
+    default = f.default
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"{name}: expected a bool, got {value!r}")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
+            raise ValueError(f"{name}: expected an integer, got {value!r}")
+        value = int(value)
+    elif isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{name}: expected a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ValueError(f"{name}: must be finite, got {value!r}")
+    elif isinstance(default, str):
+        if not isinstance(value, str):
+            raise ValueError(f"{name}: expected a string, got {value!r}")
+        choices = meta.get("choices")
+        if choices and value not in choices:
+            raise ValueError(f"{name}: '{value}' is not one of {list(choices)}")
+        return value
+    elif isinstance(default, tuple):
+        if not isinstance(value, list | tuple):
+            raise ValueError(f"{name}: expected a list, got {value!r}")
+        value = tuple(float(v) for v in value)
+        if not all(math.isfinite(v) for v in value):
+            raise ValueError(f"{name}: every element must be finite")
+    lo, hi = meta.get("lo"), meta.get("hi")
+    items = value if isinstance(value, tuple) else (value,)
+    for v in items:
+        if lo is not None and v < lo:
+            raise ValueError(f"{name}: {v} is below the minimum {lo} {meta.get('unit', '')}".rstrip())
+        if hi is not None and v > hi:
+            raise ValueError(f"{name}: {v} is above the maximum {hi} {meta.get('unit', '')}".rstrip())
+    return value
+
+
+def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True) -> T:
+    """Build and validate a config dataclass from a flat mapping of field values.
+
+    Unknown keys raise when ``strict``. Cross-field rules live in the class's
+    ``__post_init__`` and raise ``ValueError`` naming the fields.
+    """
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(values) - names
+    if strict and unknown:
+        raise ValueError(f"{cls.__name__}: unknown parameter(s) {sorted(unknown)}")
+    kwargs = {k: check_field(cls, k, v) for k, v in values.items() if k in names}
+    return cls(**kwargs)
+
+
+def load_ros_params_yaml(path: str, node_name: str) -> dict[str, Any]:
+    """Read ``node_name: ros__parameters: {...}`` from a ROS 2 params file.
+
+    Accepts the node name with or without a leading slash and the ``/**`` wildcard;
+    later sections override earlier ones as in rcl.
+    """
+    import yaml
+
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh) or {}
+    out: dict[str, Any] = {}
+    for key in ("/**", node_name.lstrip("/"), "/" + node_name.lstrip("/")):
+        section = data.get(key)
+        if isinstance(section, dict):
+            out.update(_flatten(section.get("ros__parameters", {}) or {}))
+    return out
+
+
+def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
