@@ -1,0 +1,275 @@
+"""Graph supervisor: start fourws nodes as ordinary processes, watch them, stop them cleanly.
+
+This is the small replacement for ``ros2 launch`` on machines without ``launch_ros``. Each
+node is the same executable ``ros2 run <package> <executable>`` would start
+(``<prefix>/lib/<package>/<executable>``), given ``--ros-args`` with its parameter files and
+remappings. All nodes of a graph share one ``ROS_DOMAIN_ID`` with discovery kept on this host.
+
+- :meth:`Supervisor.start` starts every node and waits until each is present in the ROS graph
+  (graph introspection from a private context in the same domain; a timeout names the
+  missing nodes).
+- :meth:`Supervisor.check` raises :class:`NodeDied` naming a node that exited, with its exit
+  code and last log lines.
+- :meth:`Supervisor.stop` sends SIGINT, then SIGTERM and SIGKILL after timeouts, to every
+  process group. Children also get ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import os
+import random
+import signal
+import subprocess
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+DOMAIN_LOCK_DIR = Path(os.environ.get("FOURWS_DOMAIN_LOCK_DIR", "/tmp"))
+DOMAIN_RANGE = range(1, 101)
+
+
+class SupervisorError(RuntimeError):
+    """A graph could not be started or kept alive."""
+
+
+class NodeDied(SupervisorError):
+    """A supervised node exited while the graph was running."""
+
+    def __init__(self, name: str, returncode: int, last_lines: list[str]) -> None:
+        self.name = name
+        self.returncode = returncode
+        self.last_lines = last_lines
+        tail = "\n".join("    " + line for line in last_lines)
+        super().__init__(f"node '{name}' died with exit code {returncode}; last log lines:\n{tail}")
+
+
+class GraphTimeout(SupervisorError):
+    """Some nodes never appeared in the ROS graph."""
+
+    def __init__(self, missing: list[str], timeout_s: float) -> None:
+        self.missing = missing
+        super().__init__(
+            f"node(s) {', '.join(missing)} did not appear in the ROS graph within {timeout_s:.0f} s"
+        )
+
+
+@dataclass
+class NodeSpec:
+    """One node to start: ``ros2 run package executable --ros-args ...``."""
+
+    name: str
+    package: str
+    executable: str
+    params_files: list[str] = field(default_factory=list)
+    parameters: dict[str, object] = field(default_factory=dict)
+    remappings: dict[str, str] = field(default_factory=dict)
+    extra_args: list[str] = field(default_factory=list)
+    log_level: str = "info"
+    argv: list[str] | None = None  # a program to run instead of lib/<package>/<executable>
+
+    def command(self) -> list[str]:
+        program = self.argv or [str(executable_path(self.package, self.executable))]
+        cmd = [*program, "--ros-args", "-r",
+               f"__node:={self.name}", "--log-level", self.log_level]
+        for f in self.params_files:
+            cmd += ["--params-file", str(f)]
+        for k, v in self.parameters.items():
+            cmd += ["-p", f"{k}:={_param_literal(v)}"]
+        for src, dst in self.remappings.items():
+            cmd += ["-r", f"{src}:={dst}"]
+        return cmd + list(self.extra_args)
+
+
+def _param_literal(v: object) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return v
+    return repr(v)
+
+
+def executable_path(package: str, executable: str) -> Path:
+    """Where ``ros2 run`` would find the executable: ``<prefix>/lib/<package>/<executable>``."""
+    from ament_index_python.packages import get_package_prefix
+
+    path = Path(get_package_prefix(package)) / "lib" / package / executable
+    if not path.exists():
+        raise SupervisorError(f"executable not found: {path} (is the workspace built?)")
+    return path
+
+
+class DomainLease:
+    """An exclusive ``ROS_DOMAIN_ID`` for this process, held by a lock file until released."""
+
+    def __init__(self, preferred: int | None = None) -> None:
+        candidates = list(DOMAIN_RANGE)
+        random.Random(os.getpid() ^ time.monotonic_ns()).shuffle(candidates)
+        if preferred is not None:
+            candidates.insert(0, preferred)
+        for did in candidates:
+            fh = open(DOMAIN_LOCK_DIR / f"fourws-domain-{did}.lock", "w")  # noqa: SIM115
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.close()
+                continue
+            self.domain_id = did
+            self._fh = fh
+            return
+        raise SupervisorError("no free ROS_DOMAIN_ID in 1..100")
+
+    def release(self) -> None:
+        if self._fh is not None:
+            fcntl.flock(self._fh, fcntl.LOCK_UN)
+            self._fh.close()
+            self._fh = None
+
+
+def _set_pdeathsig() -> None:
+    with contextlib.suppress(Exception):
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+class _Proc:
+    def __init__(self, spec: NodeSpec, popen: subprocess.Popen, log_path: Path) -> None:
+        self.spec = spec
+        self.popen = popen
+        self.log_path = log_path
+
+    def last_lines(self, n: int = 15) -> list[str]:
+        try:
+            with open(self.log_path, encoding="utf-8", errors="replace") as fh:
+                return [line.rstrip("\n") for line in deque(fh, maxlen=n)]
+        except OSError:
+            return []
+
+
+class Supervisor:
+    """Start, watch and stop a list of nodes in one ROS domain on this host."""
+
+    def __init__(self, specs: list[NodeSpec], domain_id: int, log_dir: str | Path,
+                 env: dict[str, str] | None = None) -> None:
+        names = [s.name for s in specs]
+        if len(set(names)) != len(names):
+            raise SupervisorError(f"node names must be unique: {names}")
+        self.specs = specs
+        self.domain_id = domain_id
+        self.log_dir = Path(log_dir)
+        self.env = dict(os.environ)
+        self.env.update(env or {})
+        self.env["ROS_DOMAIN_ID"] = str(domain_id)
+        self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        self.env["PYTHONUNBUFFERED"] = "1"
+        self.env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "0")
+        self.procs: dict[str, _Proc] = {}
+        self._ctx = None
+        self._probe = None
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def start(self, timeout_s: float = 30.0) -> None:
+        """Start every node and wait until all are in the ROS graph."""
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            for spec in self.specs:
+                self._spawn(spec)
+            self.wait_for_graph([s.name for s in self.specs], timeout_s)
+        except BaseException:
+            self.stop()
+            raise
+
+    def _spawn(self, spec: NodeSpec) -> None:
+        log_path = self.log_dir / f"{spec.name}.log"
+        fh = open(log_path, "w", encoding="utf-8")  # noqa: SIM115
+        popen = subprocess.Popen(  # noqa: S603
+            spec.command(), stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env=self.env, start_new_session=True, preexec_fn=_set_pdeathsig,
+        )
+        fh.close()
+        self.procs[spec.name] = _Proc(spec, popen, log_path)
+
+    def _graph_probe(self):
+        if self._probe is None:
+            import rclpy
+
+            self._ctx = rclpy.Context()
+            rclpy.init(context=self._ctx, domain_id=self.domain_id)
+            self._probe = rclpy.create_node(
+                f"fourws_supervisor_{os.getpid()}", context=self._ctx,
+                start_parameter_services=False, enable_rosout=False,
+            )
+        return self._probe
+
+    def wait_for_graph(self, names: list[str], timeout_s: float) -> None:
+        """Poll graph introspection until every name is present; raise naming the missing."""
+        probe = self._graph_probe()
+        deadline = time.monotonic() + timeout_s
+        missing = list(names)
+        while True:
+            self.check()
+            present = {n for n, _ns in probe.get_node_names_and_namespaces()}
+            missing = [n for n in names if n not in present]
+            if not missing:
+                return
+            if time.monotonic() > deadline:
+                raise GraphTimeout(missing, timeout_s)
+            time.sleep(0.05)
+
+    def check(self) -> None:
+        """Raise :class:`NodeDied` if any node has exited."""
+        for name, proc in self.procs.items():
+            rc = proc.popen.poll()
+            if rc is not None:
+                raise NodeDied(name, rc, proc.last_lines())
+
+    def exited(self) -> dict[str, int]:
+        """Nodes that have exited, with their exit codes."""
+        return {n: p.popen.returncode for n, p in self.procs.items() if p.popen.poll() is not None}
+
+    def wait_exit(self, name: str, timeout_s: float | None = None) -> int:
+        """Wait for one node to exit by itself (e.g. the plant at the end of a scenario)."""
+        return self.procs[name].popen.wait(timeout=timeout_s)
+
+    def stop(self, sigint_timeout_s: float = 5.0, sigterm_timeout_s: float = 3.0) -> dict[str, int]:
+        """Stop every node: SIGINT, then SIGTERM, then SIGKILL. Returns the exit codes."""
+        for sig, timeout in ((signal.SIGINT, sigint_timeout_s),
+                             (signal.SIGTERM, sigterm_timeout_s), (signal.SIGKILL, 5.0)):
+            alive = [p for p in self.procs.values() if p.popen.poll() is None]
+            if not alive:
+                break
+            for p in alive:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(p.popen.pid, sig)
+            deadline = time.monotonic() + timeout
+            for p in alive:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
+        # Reap stragglers left in a node's process group (e.g. grandchildren).
+        for p in self.procs.values():
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(p.popen.pid, signal.SIGKILL)
+        self._close_probe()
+        return {n: p.popen.returncode for n, p in self.procs.items()}
+
+    def _close_probe(self) -> None:
+        if self._probe is not None:
+            import rclpy
+
+            self._probe.destroy_node()
+            rclpy.try_shutdown(context=self._ctx)
+            self._probe = None
+            self._ctx = None
+
+    def pids(self) -> list[int]:
+        return [p.popen.pid for p in self.procs.values()]
+
+    def __enter__(self) -> Supervisor:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

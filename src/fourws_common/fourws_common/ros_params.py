@@ -1,0 +1,94 @@
+"""Declare a core's config dataclass as ROS parameters with descriptors and ranges.
+
+Values come from the package YAML (``--params-file``); types, ranges and descriptions come
+from the dataclass field metadata (:func:`fourws_common.params.param`). Runtime changes go
+through :meth:`ParamBinding.on_set`, which validates the whole new config (field rules and
+cross-field rules) and swaps it in at once, or rejects the change with the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any, Generic, TypeVar
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from fourws_common.params import check_field
+
+T = TypeVar("T")
+
+
+def _descriptor(f: dataclasses.Field) -> ParameterDescriptor:
+    meta = f.metadata
+    unit = meta.get("unit") or ""
+    text = meta.get("description", "") + (f" [{unit}]" if unit else "")
+    choices = meta.get("choices")
+    if choices:
+        text += f" one of {list(choices)}"
+    desc = ParameterDescriptor(description=text)
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if lo is not None and hi is not None and not isinstance(f.default, tuple | bool):
+        if isinstance(f.default, int):
+            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        elif isinstance(f.default, float):
+            desc.floating_point_range = [
+                FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)
+            ]
+    return desc
+
+
+def _ros_default(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+class ParamBinding(Generic[T]):
+    """Binds a frozen config dataclass to a node's parameters.
+
+    ``binding.config`` is always a complete, validated config. ``on_change`` (optional) is
+    called with the new config after a runtime change has been accepted.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        cls: type[T],
+        on_change: Callable[[T], None] | None = None,
+        skip: tuple[str, ...] = (),
+    ) -> None:
+        self._node = node
+        self._cls = cls
+        self._on_change = on_change
+        self._fields = [f for f in dataclasses.fields(cls) if f.name not in skip]
+        values: dict[str, Any] = {}
+        for f in self._fields:
+            node.declare_parameter(f.name, _ros_default(f.default), _descriptor(f))
+            values[f.name] = node.get_parameter(f.name).value
+        self.config: T = self._build(values)
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _build(self, values: dict[str, Any]) -> T:
+        kwargs = {name: check_field(self._cls, name, v) for name, v in values.items()}
+        return self._cls(**kwargs)
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        values = {f.name: getattr(self.config, f.name) for f in self._fields}
+        for p in params:
+            if p.name in values:
+                values[p.name] = p.value
+        try:
+            new = self._build(values)
+        except (ValueError, TypeError) as exc:
+            self._node.get_logger().warning(f"rejected parameter change: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.config = new
+        if self._on_change is not None:
+            self._on_change(new)
+        return SetParametersResult(successful=True)

@@ -1,0 +1,37 @@
+"""Test node: publishes fourws_msgs/MpcCommand on /chatter_cmd at 50 Hz, counting up."""
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from fourws_msgs.msg import MpcCommand
+
+
+class Talker(Node):
+    def __init__(self) -> None:
+        super().__init__("talker")
+        self.pub = self.create_publisher(MpcCommand, "chatter_cmd", 10)
+        self.n = 0
+        self.create_timer(0.02, self.tick)
+
+    def tick(self) -> None:
+        self.n += 1
+        self.pub.publish(MpcCommand(delta_front=float(self.n), yaw_moment=0.5 * self.n))
+
+
+def main() -> None:
+    rclpy.init()
+    node = None
+    try:
+        node = Talker()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,113 @@
+"""The graph supervisor over real processes and real DDS (issue: foundation)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+from conftest import pid_alive, script_node
+
+from fourws_bringup.supervisor import GraphTimeout, NodeDied, NodeSpec
+from fourws_msgs.msg import MpcCommand
+
+pytestmark = pytest.mark.integration
+
+
+def test_two_nodes_exchange_messages_over_a_real_topic(graph, ros):
+    graph([NodeSpec(**script_node("talker.py", "talker")),
+           NodeSpec(**script_node("relay.py", "relay"))])
+    got: list[MpcCommand] = []
+    ros.node.create_subscription(MpcCommand, "relayed_cmd", got.append, 10)
+    assert ros.spin_until(lambda: len(got) >= 5, 30.0), "no relayed messages arrived"
+    for m in got:
+        assert m.delta_front == pytest.approx(2.0 * (m.yaw_moment / 0.5))
+
+
+def test_crashing_node_is_reported_by_name_and_the_others_are_stopped(graph):
+    sup = graph([NodeSpec(**script_node("talker.py", "talker")),
+                 NodeSpec(**script_node("crasher.py", "crasher"))])
+    with pytest.raises(NodeDied) as info:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            sup.check()
+            time.sleep(0.05)
+    assert info.value.name == "crasher"
+    assert info.value.returncode == 3
+    assert any("simulated fault" in line for line in info.value.last_lines)
+    talker_pid = sup.procs["talker"].popen.pid
+    sup.stop()
+    assert not pid_alive(talker_pid)
+
+
+def test_node_that_never_appears_times_out_naming_it(graph):
+    with pytest.raises(GraphTimeout) as info:
+        graph([NodeSpec(**script_node("talker.py", "talker")),
+               NodeSpec(**script_node("ghost.py", "ghost"))], timeout_s=6.0)
+    assert info.value.missing == ["ghost"]
+    assert "ghost" in str(info.value)
+
+
+def test_sigint_to_the_supervisor_leaves_no_process_behind(domain_id, tmp_path):
+    """A supervisor process running a graph gets SIGINT: afterwards no node process exists."""
+    here = os.path.dirname(__file__)
+    prog = textwrap.dedent(f"""
+        import sys, time
+        sys.path.insert(0, {here!r})
+        from conftest import script_node
+        from fourws_bringup.supervisor import NodeSpec, Supervisor
+        sup = Supervisor([NodeSpec(**script_node("talker.py", "talker")),
+                          NodeSpec(**script_node("relay.py", "relay"))],
+                         {domain_id}, {str(tmp_path / "logs")!r})
+        try:
+            sup.start()
+            print("PIDS", *sup.pids(), flush=True)
+            while True:
+                sup.check()
+                time.sleep(0.05)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sup.stop()
+            print("STOPPED", flush=True)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", prog], stdout=subprocess.PIPE, text=True)
+    pids: list[int] = []
+    for line in proc.stdout:
+        if line.startswith("PIDS"):
+            pids = [int(p) for p in line.split()[1:]]
+            break
+    assert len(pids) == 2 and all(pid_alive(p) for p in pids)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    assert "STOPPED" in out
+    assert not [p for p in pids if pid_alive(p)], "node processes survived SIGINT"
+
+
+def test_killed_supervisor_takes_its_nodes_down(domain_id, tmp_path):
+    """Even SIGKILL to the supervisor leaves no node behind (PR_SET_PDEATHSIG)."""
+    here = os.path.dirname(__file__)
+    prog = textwrap.dedent(f"""
+        import sys, time
+        sys.path.insert(0, {here!r})
+        from conftest import script_node
+        from fourws_bringup.supervisor import NodeSpec, Supervisor
+        sup = Supervisor([NodeSpec(**script_node("talker.py", "talker"))],
+                         {domain_id}, {str(tmp_path / "logs")!r})
+        sup.start()
+        print("PIDS", *sup.pids(), flush=True)
+        time.sleep(60)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", prog], stdout=subprocess.PIPE, text=True)
+    pids = [int(p) for p in proc.stdout.readline().split()[1:]]
+    assert pids and all(pid_alive(p) for p in pids)
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while any(pid_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [p for p in pids if pid_alive(p)]
