@@ -72,12 +72,13 @@ def check_field(cls: type, name: str, value: Any) -> Any:
         if not all(math.isfinite(v) for v in value):
             raise ValueError(f"{name}: every element must be finite")
     lo, hi = meta.get("lo"), meta.get("hi")
+    unit = meta.get("unit") or ""
     items = value if isinstance(value, tuple) else (value,)
     for v in items:
         if lo is not None and v < lo:
-            raise ValueError(f"{name}: {v} is below the minimum {lo} {meta.get('unit', '')}".rstrip())
+            raise ValueError(f"{name}: {v} is below the minimum {lo} {unit}".rstrip())
         if hi is not None and v > hi:
-            raise ValueError(f"{name}: {v} is above the maximum {hi} {meta.get('unit', '')}".rstrip())
+            raise ValueError(f"{name}: {v} is above the maximum {hi} {unit}".rstrip())
     return value
 
 

@@ -8,7 +8,8 @@ import rclpy
 rclpy.init()
 node = rclpy.create_node("crasher")
 node.get_logger().info("crasher up; about to fail on purpose")
-end = time.monotonic() + float(sys.argv[1] if len(sys.argv) > 1 and sys.argv[1][0].isdigit() else 2.0)
+delay_s = float(sys.argv[1]) if len(sys.argv) > 1 and sys.argv[1][0].isdigit() else 2.0
+end = time.monotonic() + delay_s
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
 print("crasher: simulated fault", flush=True)
