@@ -1,0 +1,200 @@
+"""One closed-loop run over real topics: start the graph, record it, stop it, score it.
+
+``run(scenario, controller, out_dir)`` starts plant, MPC, speed PID, allocator and recorder
+as separate processes with the supervisor (their package YAML plus the controller preset as
+``--params-file``), shows simulated time as it goes, waits for the plant to end the scenario,
+stops the graph cleanly and writes ``out_dir/metrics.json`` computed from the recorded bag
+alone (the same code as ``fourws report``) plus ``out_dir/plots/``. A node that dies stops
+the run; the bag is kept and metrics.json says which node died.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from fourws_common.resources import config_dir
+
+from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
+
+CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
+
+
+class RunError(RuntimeError):
+    """A run could not be started (bad arguments, existing output, unknown preset)."""
+
+
+def controller_preset(name_or_path: str) -> Path:
+    """Path of a controller preset: a name in fourws_bringup/config/controllers or a file."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise RunError(f"controller preset file not found: {p}")
+        return p.resolve()
+    path = config_dir("fourws_bringup") / "controllers" / f"{name_or_path}.yaml"
+    if not path.is_file():
+        known = sorted(q.stem for q in path.parent.glob("*.yaml"))
+        raise RunError(f"unknown controller '{name_or_path}'; known: {', '.join(known)}")
+    return path
+
+
+def scenario_arg(name_or_path: str) -> str:
+    """A scenario name stays a name; a YAML path becomes absolute for the plant process."""
+    p = Path(name_or_path)
+    return str(p.resolve()) if p.suffix in (".yaml", ".yml") else name_or_path
+
+
+def prepare_out_dir(out_dir: Path, force: bool) -> None:
+    """Refuse to overwrite an existing, non-empty output folder unless ``force``."""
+    if out_dir.exists() and any(out_dir.iterdir()):
+        if not force:
+            raise RunError(f"output folder {out_dir} exists and is not empty; "
+                           "use --force to overwrite it")
+        shutil.rmtree(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+
+def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
+                extra_plant: dict | None = None) -> list[NodeSpec]:
+    """The node list of a run: every node with its package YAML and the controller preset."""
+    preset = str(controller_preset(controller))
+    subscribers = 3 + (1 if bag_dir is not None else 0)
+    plant_params = {"scenario": scenario_arg(scenario), "mode": mode,
+                    "wait_for_subscribers": subscribers if mode == "lockstep" else 0}
+    plant_params.update(extra_plant or {})
+    sync = "lockstep" if mode == "lockstep" else "latest"
+    specs = [
+        NodeSpec("plant_node", "fourws_sim", "plant_node",
+                 params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
+                 parameters=plant_params),
+        NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                 params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset]),
+        NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
+                 params_files=[str(config_dir("fourws_torque_alloc") / "speed_pid.yaml")]),
+        NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
+                 params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
+                               preset], parameters={"sync": sync}),
+    ]
+    if bag_dir is not None:
+        specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
+                              params_files=[str(config_dir("fourws_bringup") / "recorder.yaml")],
+                              parameters={"output_dir": str(bag_dir)}))
+    return specs
+
+
+@dataclass
+class RunOutcome:
+    completed: bool
+    reason: str
+    wall_time_s: float
+    sim_time_s: float
+    steps: int
+    died: str | None = None
+
+
+class _Monitor:
+    """A small rclpy node in the run's domain: /clock for progress, /run/status for the end."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import String
+
+        from fourws_common.qos import CLOCK_QOS, LATCHED_QOS
+
+        self._rclpy = rclpy
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=domain_id)
+        self.node = rclpy.create_node(f"fourws_run_monitor_{id(self)}", context=self.ctx,
+                                      start_parameter_services=False)
+        self.sim_time_s = 0.0
+        self.status: dict = {}
+        self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
+        self.node.create_subscription(String, "/run/status", self._on_status, LATCHED_QOS)
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def _on_clock(self, msg) -> None:
+        self.sim_time_s = msg.clock.sec + msg.clock.nanosec * 1e-9
+
+    def _on_status(self, msg) -> None:
+        try:
+            self.status = json.loads(msg.data)
+        except ValueError:
+            pass
+
+    def spin(self, timeout_s: float) -> None:
+        self.ex.spin_once(timeout_sec=timeout_s)
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.node.destroy_node()
+        self._rclpy.try_shutdown(context=self.ctx)
+
+
+def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "lockstep",
+              record: bool = True, progress: bool = True, timeout_s: float = 1800.0,
+              extra_plant: dict | None = None, stream=sys.stderr) -> RunOutcome:
+    """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome."""
+    bag_dir = out_dir / "bag" if record else None
+    specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant)
+    lease = DomainLease()
+    sup = Supervisor(specs, lease.domain_id, out_dir / "logs")
+    monitor = None
+    died = None
+    t0 = time.monotonic()
+    try:
+        sup.start(timeout_s=60.0)
+        monitor = _Monitor(lease.domain_id)
+        t0 = time.monotonic()
+        last_print = 0.0
+        while True:
+            monitor.spin(0.05)
+            exited = sup.exited()
+            if "plant_node" in exited:
+                if exited["plant_node"] != 0:
+                    raise NodeDied("plant_node", exited["plant_node"],
+                                   sup.procs["plant_node"].last_lines())
+                break
+            sup.check()
+            now = time.monotonic()
+            if now - t0 > timeout_s:
+                raise SupervisorError(f"run did not end within {timeout_s:.0f} s of wall time")
+            if progress and now - last_print > 0.5:
+                last_print = now
+                rtf = monitor.sim_time_s / max(now - t0, 1e-9)
+                stream.write(f"\r  {controller} on {scenario}: t_sim = {monitor.sim_time_s:6.2f} s"
+                             f"  wall {now - t0:6.1f} s  RTF {rtf:4.1f}   ")
+                stream.flush()
+        wall = time.monotonic() - t0
+        for _ in range(20):  # the final status is latched; give it a moment to arrive
+            if monitor.status.get("state") == "ended":
+                break
+            monitor.spin(0.05)
+        st = monitor.status
+        outcome = RunOutcome(bool(st.get("completed", False)),
+                             str(st.get("reason", "plant ended without a status")), wall,
+                             float(st.get("sim_time_s", monitor.sim_time_s)),
+                             int(st.get("steps", 0)))
+    except NodeDied as exc:
+        died = exc.name
+        outcome = RunOutcome(False, str(exc).splitlines()[0], time.monotonic() - t0,
+                             monitor.sim_time_s if monitor else 0.0, 0, died)
+        stream.write(f"\n{exc}\n")
+    except KeyboardInterrupt:
+        outcome = RunOutcome(False, "interrupted by the user (Ctrl-C)", time.monotonic() - t0,
+                             monitor.sim_time_s if monitor else 0.0, 0)
+    finally:
+        if monitor is not None:
+            monitor.close()
+        sup.stop()
+        lease.release()
+    if progress:
+        stream.write("\n")
+    return outcome

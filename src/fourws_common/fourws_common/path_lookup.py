@@ -1,0 +1,41 @@
+"""Nearest point on a sampled path, with a moving search window (pure numpy).
+
+Given path samples (x_i, y_i) in increasing arc length, :class:`PathIndex` returns the index
+of the sample nearest to a position, searching a window around the previous answer so the
+cost per call is constant; a full search is done on the first call and whenever the window
+answer lies on its edge. Used by the speed controller for the reference speed; the MPC has its
+own projection in ``fourws_mpc.core.reference``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class PathIndex:
+    """Nearest-sample lookup on a path; ``x``, ``y`` shape (N,), m."""
+
+    def __init__(self, x: np.ndarray, y: np.ndarray, window: int = 200) -> None:
+        self.x = np.asarray(x, dtype=float)
+        self.y = np.asarray(y, dtype=float)
+        if self.x.shape != self.y.shape or self.x.ndim != 1 or self.x.size < 2:
+            raise ValueError("path needs x and y of equal length >= 2")
+        if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.y))):
+            raise ValueError("path holds non-finite coordinates")
+        self.window = window
+        self._last: int | None = None
+
+    def nearest(self, px: float, py: float) -> int:
+        """Index of the sample nearest to (px, py)."""
+        n = self.x.size
+        if self._last is not None:
+            lo = max(0, self._last - self.window)
+            hi = min(n, self._last + self.window + 1)
+            d2 = (self.x[lo:hi] - px) ** 2 + (self.y[lo:hi] - py) ** 2
+            i = lo + int(np.argmin(d2))
+            if (i > lo or lo == 0) and (i < hi - 1 or hi == n):
+                self._last = i
+                return i
+        d2 = (self.x - px) ** 2 + (self.y - py) ** 2
+        self._last = int(np.argmin(d2))
+        return self._last

@@ -1,0 +1,308 @@
+"""Plant node: runs the fourws_sim core as the vehicle on the ROS graph.
+
+Publishes ``/clock``, ``/vehicle/state``, ``/vehicle/odom`` every step and the scenario's
+``/reference/trajectory`` and ``/reference/path`` once (transient_local); subscribes
+``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``.
+
+Timing modes:
+- ``lockstep`` (default): publish the state for step k, wait until the MpcCommand and the
+  WheelTorques stamped k are both held, then integrate to k+1. While waiting, the state k is
+  published again every ``republish_period_s`` of wall time (a late subscriber or a lost
+  message never stalls the run; controllers answer a repeated stamp with their cached
+  output). No command for ``command_timeout_s`` ends the run with a reason naming the
+  missing input.
+- ``realtime``: step on a 10 ms wall timer, holding the latest valid commands.
+
+Bad input: a NaN/inf command is rejected and the last valid one held (counted, logged at most
+once per second); angles beyond the actuator limits are clipped by the actuator model with a
+warning; in lockstep a command stamped for another step is ignored. The run ends at the
+scenario's end, when the car leaves the road (``abort_lateral_error_m``) or spins
+(``abort_sideslip_deg``); the reason is logged and published on ``/run/status``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry, Path
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+
+from fourws_common.conversions import (
+    RateLimitedLog,
+    fill_vehicle_state,
+    ns_to_stamp,
+    stamp_to_ns,
+)
+from fourws_common.node_main import run_node
+from fourws_common.params import param
+from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_common.ros_params import ParamBinding
+from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
+from fourws_sim.core.scenario import load_scenario
+from fourws_sim.core.simulator import Simulator
+
+
+@dataclass(frozen=True)
+class PlantNodeConfig:
+    scenario: str = param("dlc_60_mu05", "scenario name (config/scenarios) or path to a YAML")
+    mode: str = param("lockstep", "timing mode", choices=("lockstep", "realtime"))
+    dt_s: float = param(0.01, "control period", lo=0.001, hi=0.1, unit="s")
+    substep_s: float = param(0.001, "RK4 integration substep", lo=1e-5, hi=0.01, unit="s")
+    abort_lateral_error_m: float = param(5.0, "end the run beyond this lateral error",
+                                         lo=0.1, hi=100.0, unit="m")
+    abort_sideslip_deg: float = param(30.0, "end the run beyond this sideslip",
+                                      lo=1.0, hi=90.0, unit="deg")
+    command_timeout_s: float = param(20.0, "lockstep: end the run when a step's commands "
+                                     "do not arrive within this wall time", lo=0.5, hi=600.0,
+                                     unit="s")
+    republish_period_s: float = param(0.25, "lockstep: publish the waiting state again after "
+                                      "this wall time", lo=0.01, hi=10.0, unit="s")
+    wait_for_subscribers: int = param(0, "lockstep: hold the first state until /vehicle/state "
+                                      "has this many subscribers (0: start at once)",
+                                      lo=0, hi=100)
+    path_pose_spacing_m: float = param(0.5, "spacing of poses in /reference/path",
+                                       lo=0.05, hi=10.0, unit="m")
+
+    def __post_init__(self) -> None:
+        ratio = self.dt_s / self.substep_s
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(f"dt_s ({self.dt_s}) must be an integer multiple of substep_s "
+                             f"({self.substep_s})")
+
+
+class PlantNode(Node):
+    """Wires the plant core to topics; all physics is in fourws_sim.core."""
+
+    def __init__(self) -> None:
+        super().__init__("plant_node")
+        self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
+        cfg = self.params.config
+        self.scenario = load_scenario(cfg.scenario)
+        self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s)
+        self.dt_ns = int(round(cfg.dt_s * 1e9))
+        self.step_k = 0
+        self.done = False
+        self.exit_code = 0
+        self.steer_cmd = (0.0, 0.0)
+        self.torque_cmd = np.zeros(4)
+        self.pending_cmd: MpcCommand | None = None
+        self.pending_torque: WheelTorques | None = None
+        self.last_progress = time.monotonic()
+        self.last_publish = time.monotonic()
+        log = self.get_logger()
+        self.reject_log = RateLimitedLog(log.warning)
+        self.stamp_log = RateLimitedLog(log.warning)
+        self.clip_log = RateLimitedLog(log.warning)
+
+        self.pub_state = self.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+        self.pub_odom = self.create_publisher(Odometry, "/vehicle/odom", CONTROL_QOS)
+        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self.pub_ref = self.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                             LATCHED_QOS)
+        self.pub_path = self.create_publisher(Path, "/reference/path", LATCHED_QOS)
+        self.pub_status = self.create_publisher(String, "/run/status", LATCHED_QOS)
+        self.create_subscription(MpcCommand, "/control/mpc_command", self._on_mpc, CONTROL_QOS)
+        self.create_subscription(WheelTorques, "/control/wheel_torques", self._on_torques,
+                                 CONTROL_QOS)
+
+        log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
+        log.info(f"mode {cfg.mode}, dt {cfg.dt_s} s, substep {cfg.substep_s} s")
+        self._publish_reference()
+        self._publish_status("running", "")
+        self.outputs = self.sim.outputs()
+        self.started = cfg.mode == "realtime" or cfg.wait_for_subscribers == 0
+        if self.started:
+            self._publish_state()
+        if cfg.mode == "realtime":
+            self.create_timer(cfg.dt_s, self._realtime_tick)
+        else:
+            self.create_timer(min(cfg.republish_period_s, 0.1), self._lockstep_watchdog)
+
+    # -- parameters ----------------------------------------------------------------------
+    def _on_params(self, cfg: PlantNodeConfig) -> None:
+        self.get_logger().info("parameters updated (scenario, mode and timing apply to the next "
+                               "run; abort limits apply now)")
+
+    # -- inputs --------------------------------------------------------------------------
+    def _valid_cmd(self, msg: MpcCommand) -> bool:
+        vals = (msg.delta_front, msg.delta_rear, msg.yaw_moment)
+        if all(math.isfinite(v) for v in vals):
+            return True
+        self.reject_log(self._now_ns(), f"rejected non-finite mpc_command {vals}; holding "
+                        f"the last valid steer command {self.steer_cmd}")
+        return False
+
+    def _valid_torques(self, msg: WheelTorques) -> bool:
+        t = np.asarray(msg.torque, dtype=float)
+        if t.shape == (4,) and np.all(np.isfinite(t)):
+            return True
+        self.reject_log(self._now_ns(), f"rejected non-finite wheel_torques {t.tolist()}; "
+                        f"holding the last valid torques")
+        return False
+
+    def _on_mpc(self, msg: MpcCommand) -> None:
+        if self.done:
+            return
+        if self.params.config.mode == "realtime":
+            if self._valid_cmd(msg):
+                self.steer_cmd = (msg.delta_front, msg.delta_rear)
+            return
+        if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
+            self.stamp_log(self._now_ns(), f"ignored mpc_command stamped "
+                           f"{stamp_to_ns(msg.header.stamp)} ns while at step {self.step_k}")
+            return
+        self.pending_cmd = msg
+        self._try_step()
+
+    def _on_torques(self, msg: WheelTorques) -> None:
+        if self.done:
+            return
+        if self.params.config.mode == "realtime":
+            if self._valid_torques(msg):
+                self.torque_cmd = np.asarray(msg.torque, dtype=float).copy()
+            return
+        if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
+            self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped "
+                           f"{stamp_to_ns(msg.header.stamp)} ns while at step {self.step_k}")
+            return
+        self.pending_torque = msg
+        self._try_step()
+
+    # -- stepping ------------------------------------------------------------------------
+    def _try_step(self) -> None:
+        if self.pending_cmd is None or self.pending_torque is None:
+            return
+        if self._valid_cmd(self.pending_cmd):
+            self.steer_cmd = (self.pending_cmd.delta_front, self.pending_cmd.delta_rear)
+        if self._valid_torques(self.pending_torque):
+            self.torque_cmd = np.asarray(self.pending_torque.torque, dtype=float).copy()
+        self.pending_cmd = None
+        self.pending_torque = None
+        self._advance()
+
+    def _advance(self) -> None:
+        cfg = self.params.config
+        self._warn_clipping()
+        self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1], self.torque_cmd,
+                                     dt_s=cfg.dt_s)
+        self.step_k += 1
+        self.last_progress = time.monotonic()
+        ended, reason, completed = self._end_check()
+        self._publish_state()
+        if ended:
+            self._finish(completed, reason)
+
+    def _warn_clipping(self) -> None:
+        lim_f, lim_r = self.sim.steer_limits_rad()
+        df, dr = self.steer_cmd
+        if abs(df) > lim_f or abs(dr) > lim_r:
+            self.clip_log(self._now_ns(), f"steer command ({math.degrees(df):.2f}°, "
+                          f"{math.degrees(dr):.2f}°) beyond the actuator limits "
+                          f"(±{math.degrees(lim_f):.0f}°, ±{math.degrees(lim_r):.0f}°): clipped")
+
+    def _end_check(self) -> tuple[bool, str, bool]:
+        cfg = self.params.config
+        return self.scenario.end_check(
+            self.outputs, abort_lateral_error_m=cfg.abort_lateral_error_m,
+            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
+
+    def _realtime_tick(self) -> None:
+        if not self.done:
+            self._advance()
+
+    def _lockstep_watchdog(self) -> None:
+        if self.done:
+            return
+        cfg = self.params.config
+        now = time.monotonic()
+        if not self.started:
+            if self.pub_state.get_subscription_count() < cfg.wait_for_subscribers:
+                self.last_progress = now
+                return
+            self.started = True
+            self.get_logger().info("all subscribers present: starting")
+            self._publish_state()
+            return
+        if now - self.last_progress > cfg.command_timeout_s:
+            missing = [name for name, held in (("/control/mpc_command", self.pending_cmd),
+                                               ("/control/wheel_torques", self.pending_torque))
+                       if held is None]
+            self._finish(False, f"no {' and '.join(missing)} for step {self.step_k} within "
+                         f"{cfg.command_timeout_s:.1f} s")
+            return
+        if now - self.last_publish > cfg.republish_period_s:
+            self._publish_state()
+
+    def _finish(self, completed: bool, reason: str) -> None:
+        self.get_logger().info(
+            f"run ended at t = {self.outputs.t_s:.2f} s after {self.step_k} steps: {reason}")
+        self._publish_status("ended", reason, completed)
+        self.done = True
+
+    # -- outputs -------------------------------------------------------------------------
+    def _now_ns(self) -> int:
+        return self.step_k * self.dt_ns
+
+    def _publish_state(self) -> None:
+        stamp = ns_to_stamp(self.step_k * self.dt_ns)
+        self.pub_clock.publish(Clock(clock=stamp))
+        msg = VehicleState()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "map"
+        fill_vehicle_state(msg, self.outputs)
+        self.pub_state.publish(msg)
+        o = self.outputs
+        odom = Odometry()
+        odom.header = msg.header
+        odom.child_frame_id = "base_link"
+        odom.pose.pose.position.x, odom.pose.pose.position.y = o.x, o.y
+        odom.pose.pose.orientation.z = math.sin(0.5 * o.yaw)
+        odom.pose.pose.orientation.w = math.cos(0.5 * o.yaw)
+        odom.twist.twist.linear.x, odom.twist.twist.linear.y = o.vx, o.vy
+        odom.twist.twist.angular.z = o.yaw_rate
+        self.pub_odom.publish(odom)
+        self.last_publish = time.monotonic()
+
+    def _publish_reference(self) -> None:
+        ref = self.scenario.reference
+        msg = ReferenceTrajectory()
+        msg.header.frame_id = "map"
+        msg.x, msg.y = ref.x.tolist(), ref.y.tolist()
+        msg.yaw, msg.curvature = ref.yaw.tolist(), ref.curvature.tolist()
+        msg.speed = ref.speed.tolist()
+        self.pub_ref.publish(msg)
+        path = Path()
+        path.header.frame_id = "map"
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(ref.x), np.diff(ref.y)))])
+        keep = np.unique(np.searchsorted(s, np.arange(0.0, s[-1],
+                                                      self.params.config.path_pose_spacing_m)))
+        for i in keep:
+            pose = PoseStamped()
+            pose.header.frame_id = "map"
+            pose.pose.position.x, pose.pose.position.y = float(ref.x[i]), float(ref.y[i])
+            pose.pose.orientation.z = math.sin(0.5 * ref.yaw[i])
+            pose.pose.orientation.w = math.cos(0.5 * ref.yaw[i])
+            path.poses.append(pose)
+        self.pub_path.publish(path)
+
+    def _publish_status(self, state: str, reason: str, completed: bool = False) -> None:
+        self.pub_status.publish(String(data=json.dumps({
+            "state": state, "completed": completed, "reason": reason, "steps": self.step_k,
+            "sim_time_s": self.step_k * self.dt_ns * 1e-9, "scenario": self.scenario.name,
+            "rejected_commands": self.reject_log.count,
+        })))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(PlantNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

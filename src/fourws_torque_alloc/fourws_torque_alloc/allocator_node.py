@@ -1,0 +1,119 @@
+"""Torque allocator node: four in-wheel motor torques from the drive demand and the yaw moment.
+
+Subscribes ``/vehicle/state`` (per-wheel Fz, Fy, μ), ``/control/drive_command`` (total torque
+T) and ``/control/mpc_command`` (yaw moment Mz); publishes ``/control/wheel_torques``.
+
+- ``sync: lockstep`` (default): publishes once per step, when it holds all three inputs with
+  the same stamp, stamped with it; a stamp already answered is answered again from cache.
+- ``sync: latest``: publishes on every drive command with the latest state and yaw moment.
+
+Bad input (NaN/inf, absurd demand, a wheel in the air the core cannot serve) never gives a
+non-finite torque: the core raises, the input is rejected and logged, and the last valid
+torques are published again with the new stamp so the plant never stalls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from rclpy.node import Node
+
+from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.node_main import run_node
+from fourws_common.params import param
+from fourws_common.qos import CONTROL_QOS
+from fourws_common.ros_params import ParamBinding
+from fourws_msgs.msg import DriveCommand, MpcCommand, VehicleState, WheelTorques
+from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
+
+
+@dataclass(frozen=True)
+class AllocatorNodeConfig(AllocatorConfig):
+    sync: str = param("lockstep", "lockstep: answer each stamp once all inputs hold it; "
+                      "latest: answer every drive command with the latest inputs",
+                      choices=("lockstep", "latest"))
+
+    def core(self) -> AllocatorConfig:
+        return AllocatorConfig(**{f.name: getattr(self, f.name)
+                                  for f in fields(AllocatorConfig)})
+
+
+class AllocatorNode(Node):
+    def __init__(self) -> None:
+        super().__init__("allocator_node")
+        self.params = ParamBinding(self, AllocatorNodeConfig, on_change=self._on_params)
+        self.alloc = TorqueAllocator(self.params.config.core())
+        self.states: dict[int, VehicleState] = {}
+        self.drives: dict[int, DriveCommand] = {}
+        self.mpcs: dict[int, MpcCommand] = {}
+        self.last_stamp_ns: int | None = None
+        self.cached: WheelTorques | None = None
+        self.last_valid = np.zeros(4)
+        self.reject_log = RateLimitedLog(self.get_logger().warning)
+        self.pub = self.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state",
+                                 lambda m: self._on_input(self.states, m), CONTROL_QOS)
+        self.create_subscription(DriveCommand, "/control/drive_command",
+                                 lambda m: self._on_input(self.drives, m), CONTROL_QOS)
+        self.create_subscription(MpcCommand, "/control/mpc_command",
+                                 lambda m: self._on_input(self.mpcs, m), CONTROL_QOS)
+        self.get_logger().info(f"allocation method '{self.params.config.method}'")
+
+    def _on_params(self, cfg: AllocatorNodeConfig) -> None:
+        self.alloc = TorqueAllocator(cfg.core())
+
+    def _on_input(self, store: dict, msg) -> None:
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        if self.params.config.sync == "latest":
+            store.clear()
+            store[stamp_ns] = msg
+            if store is self.drives and self.states and self.mpcs:
+                self._answer(stamp_ns, next(iter(self.states.values())), msg,
+                             next(iter(self.mpcs.values())))
+            return
+        if stamp_ns == self.last_stamp_ns and self.cached is not None:
+            if store is self.drives:
+                self.pub.publish(self.cached)
+            return
+        if self.last_stamp_ns is not None and stamp_ns < self.last_stamp_ns:
+            return
+        store[stamp_ns] = msg
+        if stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs:
+            self._answer(stamp_ns, self.states.pop(stamp_ns), self.drives.pop(stamp_ns),
+                         self.mpcs.pop(stamp_ns))
+            for d in (self.states, self.drives, self.mpcs):
+                for k in [k for k in d if k <= stamp_ns]:
+                    del d[k]
+
+    def _answer(self, stamp_ns: int, state: VehicleState, drive: DriveCommand,
+                mpc: MpcCommand) -> None:
+        out = WheelTorques()
+        out.header = drive.header
+        out.allocation = self.params.config.method
+        try:
+            res = self.alloc.allocate(drive.torque, mpc.yaw_moment,
+                                      np.asarray(state.fz), np.asarray(state.fy),
+                                      np.asarray(state.mu))
+            torque = np.asarray(res.torque_nm, dtype=float)
+            if not np.all(np.isfinite(torque)):
+                raise ValueError(f"allocation gave non-finite torques {torque.tolist()}")
+            out.unmet_torque = float(res.unmet_torque_nm)
+            out.unmet_yaw_moment = float(res.unmet_yaw_moment_nm)
+            self.last_valid = torque
+        except ValueError as exc:
+            self.reject_log(stamp_ns, f"rejected inputs at {stamp_ns} ns ({exc}); holding the "
+                            f"last valid torques")
+            torque = self.last_valid
+            out.allocation = f"{out.allocation}:held"
+        out.torque = torque.copy()
+        self.last_stamp_ns, self.cached = stamp_ns, out
+        self.pub.publish(out)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(AllocatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
