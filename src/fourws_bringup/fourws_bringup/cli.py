@@ -1,0 +1,140 @@
+"""The ``fourws`` command line.
+
+    fourws run --scenario NAME_OR_YAML --controller NAME --out DIR [--force] [--mode M]
+    fourws paper [--out DIR] [--force]
+    fourws report BAG_OR_RUN [--out DIR]
+    fourws replay BAG [--rate R] [--topics T ...] [--domain-id N]
+    fourws bag recover FILE.mcap [--out FIXED.mcap]
+    fourws scenarios | fourws controllers
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from fourws_common.resources import config_dir
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .paper import run_and_score
+    from .runner import RunError
+
+    try:
+        metrics = run_and_score(args.scenario, args.controller, Path(args.out),
+                                force=args.force, mode=args.mode, plots=not args.no_plots)
+    except RunError as exc:
+        print(f"fourws run: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(metrics, indent=2))
+    return 0 if metrics.get("completed") else 1
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from .paper import run_paper
+    from .runner import RunError
+
+    try:
+        return run_paper(Path(args.out), force=args.force, only=args.only)
+    except RunError as exc:
+        print(f"fourws paper: {exc}", file=sys.stderr)
+        return 2
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .bag import BagError
+    from .paper import report_path
+
+    try:
+        metrics = report_path(Path(args.path), Path(args.out) if args.out else None)
+    except (BagError, FileNotFoundError) as exc:
+        print(f"fourws report: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(metrics, indent=2))
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from .replay import replay_cli
+
+    return replay_cli(args.bag, rate=args.rate, topics=args.topics, domain_id=args.domain_id)
+
+
+def _cmd_bag(args: argparse.Namespace) -> int:
+    from .bag import BagError, recover
+
+    src = Path(args.file)
+    dst = Path(args.out) if args.out else src.with_name(src.stem + "_recovered.mcap")
+    try:
+        n = recover(src, dst)
+    except (BagError, FileNotFoundError) as exc:
+        print(f"fourws bag recover: {exc}", file=sys.stderr)
+        return 2
+    print(f"recovered {n} messages from {src} into {dst}")
+    return 0
+
+
+def _cmd_list(kind: str) -> int:
+    folder = (config_dir("fourws_sim") / "scenarios" if kind == "scenarios"
+              else config_dir("fourws_bringup") / "controllers")
+    for p in sorted(folder.glob("*.yaml")):
+        print(p.stem)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="fourws", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    r = sub.add_parser("run", help="run one scenario with one controller over topics")
+    r.add_argument("--scenario", required=True, help="scenario name or YAML path")
+    r.add_argument("--controller", required=True, help="controller preset name or YAML path")
+    r.add_argument("--out", required=True, help="output folder (bag/, metrics.json, plots/)")
+    r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
+    r.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    r.add_argument("--no-plots", action="store_true", help="skip the figures")
+    r.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("paper", help="run the paper's eight configurations and print Tables 6-8")
+    p.add_argument("--out", default="runs/paper")
+    p.add_argument("--force", action="store_true")
+    p.add_argument("--only", nargs="*", help="subset of runs, as controller@scenario")
+    p.set_defaults(func=_cmd_paper)
+
+    rep = sub.add_parser("report", help="metrics and figures from a recorded bag or run folder")
+    rep.add_argument("path")
+    rep.add_argument("--out", help="folder for metrics.json and plots/ (default: beside bag)")
+    rep.set_defaults(func=_cmd_report)
+
+    rp = sub.add_parser("replay", help="publish a bag's topics again, with /clock")
+    rp.add_argument("bag")
+    rp.add_argument("--rate", type=float, default=1.0, help="1.0 real time; 0 as fast as possible")
+    rp.add_argument("--topics", nargs="*", help="topics to replay (default: all recorded)")
+    rp.add_argument("--domain-id", type=int, default=None,
+                    help="ROS_DOMAIN_ID (default: the environment's)")
+    rp.set_defaults(func=_cmd_replay)
+
+    b = sub.add_parser("bag", help="bag utilities")
+    bsub = b.add_subparsers(dest="bagcmd", required=True)
+    rec = bsub.add_parser("recover", help="rewrite a truncated .mcap whole")
+    rec.add_argument("file")
+    rec.add_argument("--out")
+    rec.set_defaults(func=_cmd_bag)
+
+    sub.add_parser("scenarios", help="list scenario names").set_defaults(
+        func=lambda a: _cmd_list("scenarios"))
+    sub.add_parser("controllers", help="list controller presets").set_defaults(
+        func=lambda a: _cmd_list("controllers"))
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

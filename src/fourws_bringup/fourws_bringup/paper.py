@@ -1,0 +1,191 @@
+"""Reproduce the paper's evidence: runs, metrics from bags, Tables 6-8, report.md.
+
+Every number printed here is computed from a recorded bag by :func:`score_run`, the same code
+``fourws report`` uses, so any table can be regenerated from the bags alone.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from .runner import RunOutcome, prepare_out_dir, run_graph
+
+# Paper, Tables 6-8: (max |eY| m, RMSE eY m, MAE eY m, max |eφ| deg, RMSE eφ deg)
+PAPER_T6 = {
+    "mpc_fws": (0.21414, 0.08966, 0.07075, 3.1302, 0.9826),
+    "mpc_4ws": (0.13691, 0.05957, 0.04600, 2.9293, 1.0385),
+    "improved": (0.08910, 0.03319, 0.02522, 2.5573, 0.7903),
+}
+PAPER_T7 = {
+    "mpc_fws": (0.37419, 0.17540, 0.14823, 4.8305, 1.8007),
+    "mpc_4ws": (0.20706, 0.09896, 0.07935, 5.8284, 2.8856),
+    "improved": (0.16297, 0.06216, 0.04721, 3.7547, 1.4459),
+}
+# Table 8: (max |eY| m, RMSE eY m, MAE eY m, max |β| deg, RMSE β deg)
+PAPER_T8 = {
+    "ampc_4ws": (0.17071, 0.08657, 0.06701, 1.51226, 0.70869),
+    "ampc_4ws_dyc": (0.12377, 0.06416, 0.04892, 0.85826, 0.43511),
+    "improved": (0.08907, 0.03318, 0.02500, 0.35506, 0.15139),
+}
+T67_KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
+            "max_abs_heading_error_deg", "rmse_heading_error_deg")
+T8_KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
+           "max_abs_sideslip_deg", "rmse_sideslip_deg")
+TABLES = (
+    ("Table 6: double lane change, 60 km/h, mu = 0.5", "dlc_60_mu05", PAPER_T6, T67_KEYS,
+     ("max|eY| m", "RMSE eY m", "MAE eY m", "max|ephi| deg", "RMSE ephi deg")),
+    ("Table 7: double lane change, 90 km/h, mu = 0.6", "dlc_90_mu06", PAPER_T7, T67_KEYS,
+     ("max|eY| m", "RMSE eY m", "MAE eY m", "max|ephi| deg", "RMSE ephi deg")),
+    ("Table 8: ablation, 60 km/h, mu = 0.5", "dlc_60_mu05", PAPER_T8, T8_KEYS,
+     ("max|eY| m", "RMSE eY m", "MAE eY m", "max|beta| deg", "RMSE beta deg")),
+)
+PAPER_RUNS = [(c, "dlc_60_mu05") for c in ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
+                                              "ampc_4ws_dyc")] + \
+             [(c, "dlc_90_mu06") for c in ("mpc_fws", "mpc_4ws", "improved")]
+DEADLINE_MS = 10.0
+
+
+def run_dir_name(controller: str, scenario: str) -> str:
+    return f"{controller}@{Path(scenario).stem}"
+
+
+def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
+              controller: str | None = None) -> dict:
+    """metrics.json content for a run folder or bag, computed from the bag alone.
+
+    ``outcome`` adds what only the live run knows (wall time, a node that died).
+    """
+    from .bag import read_run
+    from .core.metrics import run_metrics
+
+    run = read_run(path)
+    m = run_metrics(run)
+    status = run.status or {}
+    scenario = scenario or status.get("scenario") or "unknown"
+    controller = controller or (run.controller or "unknown")
+    out = {"scenario": Path(scenario).stem, "controller": controller}
+    out["steps"] = int(m.pop("steps"))
+    out["sim_time_s"] = float(m.pop("sim_time_s"))
+    wall = outcome.wall_time_s if outcome else float(status.get("wall_time_s", float("nan")))
+    out["wall_time_s"] = wall
+    out["real_time_factor"] = out["sim_time_s"] / wall if wall and wall == wall else None
+    out.update(m)
+    if outcome is not None:
+        out["completed"] = bool(outcome.completed)
+        out["reason"] = outcome.reason
+        if outcome.died:
+            out["died"] = outcome.died
+    else:
+        out["completed"] = bool(status.get("completed", False))
+        out["reason"] = str(status.get("reason", "no /run/status in the bag"))
+    return out
+
+
+def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
+                  mode: str = "lockstep", plots: bool = True, progress: bool = True) -> dict:
+    """``fourws run``: one run over topics, then metrics.json and plots from its bag."""
+    from fourws_sim.core.scenario import load_scenario
+
+    from .runner import RunError, controller_preset
+
+    controller_preset(controller)
+    try:
+        sc = load_scenario(scenario)
+    except (ValueError, FileNotFoundError) as exc:
+        raise RunError(f"scenario '{scenario}': {exc}") from exc
+    prepare_out_dir(out_dir, force)
+    print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
+    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress)
+    try:
+        metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
+    except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
+        metrics = {"scenario": sc.name, "controller": controller, "completed": False,
+                   "reason": f"{outcome.reason}; metrics failed: {exc}",
+                   "wall_time_s": outcome.wall_time_s}
+        if outcome.died:
+            metrics["died"] = outcome.died
+    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    if plots and (out_dir / "bag").exists():
+        try:
+            from .bag import read_run
+            from .report import draw_figures
+
+            draw_figures(read_run(out_dir), out_dir / "plots")
+        except Exception as exc:  # noqa: BLE001
+            print(f"[fourws] figures failed: {exc}", file=sys.stderr)
+    return metrics
+
+
+def report_path(path: Path, out: Path | None = None) -> dict:
+    """``fourws report``: metrics.json and figures recomputed from a bag or run folder."""
+    from .bag import read_run
+    from .report import draw_figures
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag or run folder")
+    out = out or (path if (path / "bag").is_dir() else path.parent)
+    metrics = score_run(path)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    draw_figures(read_run(path), out / "plots")
+    return metrics
+
+
+def _fmt(v) -> str:
+    return f"{v:.5f}" if isinstance(v, float) else str(v)
+
+
+def format_tables(results: dict[tuple[str, str], dict]) -> str:
+    """The three tables, ours beside the paper's, as Markdown."""
+    lines = []
+    for title, scenario, paper, keys, heads in TABLES:
+        lines += [f"### {title}", "",
+                  "| controller | source | " + " | ".join(heads) + " |",
+                  "|---|---|" + "---|" * len(heads)]
+        for ctrl, ref in paper.items():
+            m = results.get((ctrl, scenario))
+            ours = [_fmt(m.get(k)) if m else "not run" for k in keys]
+            lines.append(f"| {ctrl} | fourws | " + " | ".join(ours) + " |")
+            lines.append(f"| {ctrl} | paper | " + " | ".join(f"{v:.5f}" for v in ref) + " |")
+        order = sorted((c for c in paper if (c, scenario) in results),
+                       key=lambda c: results[(c, scenario)]["max_abs_lateral_error_m"])
+        paper_order = sorted(paper, key=lambda c: paper[c][0])
+        lines += ["", f"Ranking on max |eY| (best first): fourws {' < '.join(order)}; "
+                      f"paper {' < '.join(paper_order)}"
+                      + (" (same)" if order == paper_order else " (DIFFERENT)"), ""]
+    return "\n".join(lines)
+
+
+def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None) -> int:
+    """``fourws paper``: the eight runs, the tables beside the paper's, report.md."""
+    from .runner import RunError
+
+    if out.exists() and any(out.iterdir()) and not force:
+        raise RunError(f"output folder {out} exists and is not empty; use --force")
+    out.mkdir(parents=True, exist_ok=True)
+    runs = PAPER_RUNS
+    if only:
+        runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
+    results: dict[tuple[str, str], dict] = {}
+    t_start = time.monotonic()
+    for i, (ctrl, scen) in enumerate(runs):
+        bar = "#" * i + "." * (len(runs) - i)
+        print(f"[{bar}] run {i + 1}/{len(runs)}: {ctrl} on {scen}", file=sys.stderr)
+        m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen), force=True)
+        results[(ctrl, scen)] = m
+        print(f"    max|eY| {m.get('max_abs_lateral_error_m', float('nan')):.4f} m, "
+              f"RTF {m.get('real_time_factor') or float('nan'):.2f}, "
+              f"{'completed' if m.get('completed') else 'NOT completed: ' + m.get('reason', '')}",
+              file=sys.stderr)
+    wall = time.monotonic() - t_start
+    tables = format_tables(results)
+    print(tables)
+    print(f"\n{len(runs)} runs in {wall:.0f} s of wall time")
+    from .report_md import write_report
+
+    write_report(out, results, tables, wall)
+    print(f"report: {out / 'report.md'}")
+    return 0 if all(m.get("completed") for m in results.values()) else 1
