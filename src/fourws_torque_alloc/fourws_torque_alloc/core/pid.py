@@ -24,8 +24,9 @@ Anti-windup (``anti_windup``):
     "conditional"      the integrator is frozen on a step where the output is saturated and
                        the error pushes further into that limit (clamping); in addition the
                        integral term itself is kept inside [F_min, F_max].
-    "back_calculation" I_{k+1} = I_k + dt (K_i e_k + (F_k − u_k)/T_t), u_k the unsaturated
-                       output, T_t = ``tracking_time_s``; integral kept inside [F_min, F_max].
+    "back_calculation" I_{k+1} = I_k + K_i e_k dt + min(dt/T_t, 1)(F_k − u_k), u_k the
+                       unsaturated output, T_t = ``tracking_time_s`` (the min keeps the
+                       discrete update stable if T_t < dt); integral kept in [F_min, F_max].
     "none"             plain integration (kept for comparison in tests and studies only).
 
 Design of the default gains (m = 750 kg): from force to speed the car is m v̇ = F − c v² −
@@ -40,6 +41,16 @@ gain margin is > 20 dB. A 300 N disturbance (cornering drag in a lane change) co
 acceleration feedback, which for an integrator plant only adds apparent mass
 ((m + K_d) s² + K_p s + K_i) and passes wheel-speed noise; the term is implemented for
 eq. (24)'s form and can be switched on from the YAML.
+
+Default anti-windup: back-calculation with T_t = 0.1 s (10 samples, ≪ T_i = K_p/K_i = 2 s).
+Simulated on that car with the motor lag, a +30 km/h reference step from 60 km/h saturates
+the motors for ≈ 0.2 s and overshoots 0.3 % of the step, settling (2 %) in 2.3 s; conditional
+integration gives 7 % and no anti-windup 18 %. Note that a small (unsaturated) reference step
+overshoots ≈ 14 % whatever the anti-windup: around an integrator plant the integral term
+must end at the new road load, K_i ∫e dt = ΔF_load (small), so the error area gathered
+during the rise has to be paid back by an overshoot (a type-2 loop). Speed
+references should therefore change as ramps with ``a_ref_mps2`` as feed-forward (the
+scenarios of the paper hold a constant speed).
 """
 
 from __future__ import annotations
@@ -64,9 +75,9 @@ class SpeedPidConfig:
     derivative_filter_tau_s: float = param(
         0.05, "time constant of the first-order filter on the measured-speed derivative",
         lo=0.0, hi=10.0, unit="s")
-    anti_windup: str = param("conditional", "integrator anti-windup scheme",
+    anti_windup: str = param("back_calculation", "integrator anti-windup scheme",
                              choices=ANTI_WINDUP_CHOICES)
-    tracking_time_s: float = param(0.5, "back-calculation tracking time constant T_t",
+    tracking_time_s: float = param(0.1, "back-calculation tracking time constant T_t",
                                    lo=1.0e-3, hi=100.0, unit="s")
     max_total_torque_nm: float = param(2000.0, "upper limit of the total wheel torque "
                                        "(sum of the four motors' limits)", lo=0.0, hi=1.0e5,
@@ -173,7 +184,8 @@ class SpeedPid:
             i_next = i if pushing else i + cfg.ki * e * dt_s
             i_next = min(max(i_next, f_min), f_max)
         elif aw == "back_calculation":
-            i_next = i + dt_s * (cfg.ki * e + (force - u) / cfg.tracking_time_s)
+            k_aw = min(dt_s / cfg.tracking_time_s, 1.0)
+            i_next = i + cfg.ki * e * dt_s + k_aw * (force - u)
             i_next = min(max(i_next, f_min), f_max)
         else:
             i_next = i + cfg.ki * e * dt_s

@@ -1,0 +1,520 @@
+"""Distribution of the total wheel torque T and the yaw moment M_z over four in-wheel motors.
+
+Wheel order FL, FR, RL, RR (:class:`WheelIndex`). ISO 8855 signs: positive M_z turns the car
+left (counter-clockwise seen from above), so the right wheels carry more drive torque.
+With equal front and rear track B and wheel radius r the two demands are, eq. (27),
+
+    T_fl + T_fr + T_rl + T_rr = T
+    (B/2r)(−T_fl + T_fr − T_rl + T_rr) = M_z,
+
+which are equivalent to prescribing the two side sums
+
+    S_L = T_fl + T_rl = T/2 − M_z r/B,      S_R = T_fr + T_rr = T/2 + M_z r/B.
+
+``optimal`` — the paper's method, eq. (26)-(31), corrected
+    Minimise J = Σ F_xi²/(μ_i F_zi)², F_xi = T_i/r (eq. 26; μ_i is the paper's τ_i, the
+    road adhesion under wheel i). With c_i = μ_i F_zi the Lagrangian
+    J + λ_1(Σ T_i − T) + λ_2((B/2r)Σ s_i T_i − M_z), s_i = −1 left / +1 right, is
+    stationary at T_i = −(r c_i)²(λ_1 + s_i λ_2 B/2r)/2: on each side the torque is split
+    in proportion to c_i². With the side sums above (eq. 28, corrected):
+
+        T_rl = (T/2 − M_z r/B) c_rl² / (c_fl² + c_rl²),   T_fl = T/2 − M_z r/B − T_rl
+        T_rr = (T/2 + M_z r/B) c_rr² / (c_fr² + c_rr²),   T_fr = T/2 + M_z r/B − T_rr
+
+    J is a positive-definite diagonal quadratic, so this stationary point is the unique
+    minimum. What the paper prints wrongly:
+      - eq. (28), second line: T_fr = T/2 − M_z r/B − T_rr; eq. (27) gives "+ M_z r/B" for
+        the right side. Eq. (29) inherits the sign, and eq. (31)'s T_rr numerator too.
+      - eq. (30): the first term's denominator is the front wheel's (μ_fl F_zfl r)² (resp.
+        (μ_fr F_zfr r)²), not the rear wheel's; as printed ∂J/∂T_rl = 0 gives T_rl = S_L/2
+        whatever the loads.
+      - eq. (31): the denominators read μ_rl²F_zrl² + μ_rl²F_zrl²; they are
+        μ_fl²F_zfl² + μ_rl²F_zrl² (resp. front-right + rear-right). Implemented as above.
+    The closed form ignores motor limits; each wheel's torque is then clipped to
+    ±max_motor_torque_nm (what the motor would do anyway) and the shortfall reported.
+
+``optimal_bounded`` — beyond the paper
+    The same objective with per-wheel box bounds |T_i| ≤ b_i,
+        b_i = min(T_motor,max, r √max((μ_i F_zi)² − F_yi², 0)),
+    i.e. the motor limit and the part of the friction circle left over by the tyre's
+    current lateral force (eq. 25 with η_i ≤ 1). Constraints stay separable by side, so the
+    achievable side sums form the rectangle |S_L| ≤ b_fl + b_rl, |S_R| ≤ b_fr + b_rr. When
+    the demand lies outside, ``priority`` decides, lexicographically and exactly:
+      "yaw_moment":   D = S_R − S_L = 2 M_z r/B is first brought as close to its demand
+                      as the rectangle allows; then, with D fixed, S_L is chosen to bring
+                      T = 2 S_L + D as close to its demand as possible.
+      "total_torque": T = S_L + S_R first, then D with T fixed.
+    Each stage is a 1-D projection onto an interval (closed form). The tyre-usage QP with
+    these achievable (T*, M_z*) as hard equalities is then always feasible; it is solved by
+    OSQP (``bounded_solver = "osqp"``; set up once, P/l/u updated each call, warm start,
+    polishing) or by the exact per-side closed form (``"analytic"``: split ∝ c_i², then the
+    wheel that breaks its bound is pinned at it and its side partner takes the rest).
+    A side whose achievable sum sits at the edge of its range has one feasible point (both
+    wheels at their bounds); it is fixed before OSQP is called, so the QP is never
+    degenerate and polishing recovers the exact active-set solution; the remaining side-sum
+    residual (~1e-13) is moved onto the wheel with the most room. If OSQP does not report
+    "solved" with a successful polish, the analytic solution is used and the status says
+    "solver_fallback" (the two agree to ~1e-11 N·m, unit tests). The unmet parts
+    T − T_achieved and M_z − M_z,achieved are reported.
+
+``rule`` — the ablation's conventional baseline
+    Equal front/rear split of each side sum: T_fl = T_rl = S_L/2, T_fr = T_rr = S_R/2
+    (left/right difference ΔT per side = M_z r/B), clipped to the motor limits.
+
+``equal`` — T/4 per wheel (controllers without DYC), clipped to the motor limits.
+
+Wheels in the air: a wheel with F_z ≤ min_fz_n (or μ_i F_zi below 1e-3 N) can transmit no
+force: it gets zero weight in ``optimal`` (its side partner takes the whole side sum) and a
+zero bound in ``optimal_bounded``; with both wheels of a side in the air that side's sum is
+unmet and reported. ``rule`` and ``equal`` do not use the loads (as the baselines they
+model). Nothing divides by F_z.
+
+Inputs are validated: non-finite numbers, a wrong shape, μ outside [0, 3], |F_z| or |F_y|
+above 1e6 N, |T| above demand_sanity_factor × 4 T_motor,max or |M_z| above
+demand_sanity_factor × 2 B T_motor,max / r raise ``ValueError`` (the node then holds its
+last valid output). Outputs are always finite.
+
+Status strings: "ok", or a comma-separated subset, in this order, of "limited" (some demand
+unmet beyond 1e-9 relative), "wheel_lift" (some wheel's load at or below min_fz_n, reported
+by every method) and "solver_fallback" (see above).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+from fourws_common.params import param
+
+METHODS = ("optimal", "optimal_bounded", "rule", "equal")
+PRIORITIES = ("yaw_moment", "total_torque")
+BOUNDED_SOLVERS = ("osqp", "analytic")
+
+_MIN_CAPACITY_N = 1.0e-3
+_MAX_MU = 3.0
+_MAX_FORCE_N = 1.0e6
+_UNMET_REL_TOL = 1.0e-9
+_RESIDUAL_TOL = 1.0e-6
+
+
+class WheelIndex(IntEnum):
+    """Wheel order on the wire (mirrors ``fourws_sim.core.vehicle.Wheel``, kept local so the
+    allocator does not depend on the simulator package)."""
+
+    FL = 0
+    FR = 1
+    RL = 2
+    RR = 3
+
+
+_FL, _FR, _RL, _RR = WheelIndex.FL, WheelIndex.FR, WheelIndex.RL, WheelIndex.RR
+
+
+@dataclass(frozen=True)
+class AllocatorConfig:
+    """Allocation method, geometry and limits (SI units)."""
+
+    method: str = param("optimal", "allocation method", choices=METHODS)
+    track_width_m: float = param(1.30, "track width B, front = rear", lo=0.3, hi=5.0, unit="m")
+    wheel_radius_m: float = param(0.27, "effective rolling radius r", lo=0.05, hi=2.0, unit="m")
+    max_motor_torque_nm: float = param(500.0, "torque limit of each in-wheel motor, both signs",
+                                       lo=1.0, hi=1.0e5, unit="N*m")
+    priority: str = param("yaw_moment", "which demand optimal_bounded serves first when both "
+                          "cannot be met", choices=PRIORITIES)
+    min_fz_n: float = param(100.0, "a wheel with a vertical load at or below this is treated "
+                            "as in the air", lo=0.0, hi=1.0e4, unit="N")
+    friction_circle: bool = param(True, "optimal_bounded: bound each F_x by the friction "
+                                  "circle left over by the current F_y")
+    bounded_solver: str = param("osqp", "optimal_bounded: QP solver for the final split",
+                                choices=BOUNDED_SOLVERS)
+    demand_sanity_factor: float = param(10.0, "demands above this multiple of the motors' "
+                                        "capacity are rejected as absurd", lo=1.0, hi=1.0e3)
+
+    @property
+    def torque_capacity_nm(self) -> float:
+        """Largest |T| the four motors can give (N·m)."""
+        return 4.0 * self.max_motor_torque_nm
+
+    @property
+    def yaw_moment_capacity_nm(self) -> float:
+        """Largest |M_z| the motors can give at T = 0 (N·m): (B/2r)·4·T_max."""
+        return 2.0 * self.track_width_m * self.max_motor_torque_nm / self.wheel_radius_m
+
+
+@dataclass(frozen=True)
+class AllocationResult:
+    """Wheel torques (N·m, shape (4,), FL FR RL RR, read-only) and the unmet demand."""
+
+    torque_nm: np.ndarray
+    unmet_torque_nm: float
+    unmet_yaw_moment_nm: float
+    status: str
+
+
+def yaw_moment_nm(torque_nm: np.ndarray, cfg: AllocatorConfig) -> float:
+    """Yaw moment (N·m) of wheel torques (4,) by eq. (27): (B/2r)(−T_fl + T_fr − T_rl + T_rr)."""
+    t = np.asarray(torque_nm, dtype=float)
+    return cfg.track_width_m / (2.0 * cfg.wheel_radius_m) * float(
+        -t[_FL] + t[_FR] - t[_RL] + t[_RR])
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _vec4(x: object, name: str) -> list[float]:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (4,):
+        raise ValueError(f"allocation: {name} must have shape (4,), got {a.shape}")
+    out = a.tolist()
+    for v in out:
+        if not math.isfinite(v):
+            raise ValueError(f"allocation: {name} must be finite, got {out}")
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Inputs:
+    t: float
+    mz: float
+    fz: list[float]
+    fy: list[float]
+    mu: list[float]
+    cap: list[float]  # μ_i F_zi of wheels on the ground, 0 for wheels in the air
+    lift: bool
+
+
+def _prepare(t: float, mz: float, fz: object, fy: object, mu: object,
+             cfg: AllocatorConfig) -> _Inputs:
+    t = float(t)
+    mz = float(mz)
+    if not math.isfinite(t):
+        raise ValueError(f"allocation: total torque T must be finite, got {t!r}")
+    if not math.isfinite(mz):
+        raise ValueError(f"allocation: yaw moment Mz must be finite, got {mz!r}")
+    t_lim = cfg.demand_sanity_factor * cfg.torque_capacity_nm
+    if abs(t) > t_lim:
+        raise ValueError(f"allocation: total torque T = {t:.6g} N*m exceeds the sanity limit "
+                         f"{t_lim:.6g} N*m ({cfg.demand_sanity_factor:g} x capacity)")
+    m_lim = cfg.demand_sanity_factor * cfg.yaw_moment_capacity_nm
+    if abs(mz) > m_lim:
+        raise ValueError(f"allocation: yaw moment Mz = {mz:.6g} N*m exceeds the sanity limit "
+                         f"{m_lim:.6g} N*m ({cfg.demand_sanity_factor:g} x capacity)")
+    fz_l = _vec4(fz, "fz")
+    fy_l = _vec4(fy, "fy")
+    mu_l = _vec4(mu, "mu")
+    for i in range(4):
+        if not 0.0 <= mu_l[i] <= _MAX_MU:
+            raise ValueError(f"allocation: mu[{i}] = {mu_l[i]!r} is outside [0, {_MAX_MU}]")
+        if abs(fz_l[i]) > _MAX_FORCE_N:
+            raise ValueError(f"allocation: fz[{i}] = {fz_l[i]!r} N is absurd")
+        if abs(fy_l[i]) > _MAX_FORCE_N:
+            raise ValueError(f"allocation: fy[{i}] = {fy_l[i]!r} N is absurd")
+    cap = [0.0] * 4
+    lift = False
+    for i in range(4):
+        c = mu_l[i] * fz_l[i]
+        if fz_l[i] > cfg.min_fz_n and c > _MIN_CAPACITY_N:
+            cap[i] = c
+        else:
+            lift = True
+    return _Inputs(t, mz, fz_l, fy_l, mu_l, cap, lift)
+
+
+def _side_demands(t: float, mz: float, cfg: AllocatorConfig) -> tuple[float, float]:
+    dm = mz * cfg.wheel_radius_m / cfg.track_width_m
+    return 0.5 * t - dm, 0.5 * t + dm
+
+
+def _clip(v: float, lo: float, hi: float) -> float:
+    return lo if v < lo else hi if v > hi else v
+
+
+def _finish(torques: list[float], inp: _Inputs, cfg: AllocatorConfig,
+            extra_flags: tuple[str, ...] = ()) -> AllocationResult:
+    tq = np.array(torques, dtype=float)
+    tq.setflags(write=False)
+    t_ach = torques[0] + torques[1] + torques[2] + torques[3]
+    m_ach = cfg.track_width_m / (2.0 * cfg.wheel_radius_m) * (
+        -torques[_FL] + torques[_FR] - torques[_RL] + torques[_RR])
+    unmet_t = inp.t - t_ach
+    unmet_m = inp.mz - m_ach
+    flags = []
+    if (abs(unmet_t) > _UNMET_REL_TOL * max(1.0, abs(inp.t))
+            or abs(unmet_m) > _UNMET_REL_TOL * max(1.0, abs(inp.mz))):
+        flags.append("limited")
+    if inp.lift:
+        flags.append("wheel_lift")
+    flags.extend(extra_flags)
+    return AllocationResult(tq, unmet_t, unmet_m, ",".join(flags) if flags else "ok")
+
+
+def _clip_motor(torques: list[float], cfg: AllocatorConfig) -> list[float]:
+    lim = cfg.max_motor_torque_nm
+    return [_clip(v, -lim, lim) for v in torques]
+
+
+# ----------------------------------------------------------------------------- methods
+
+
+def optimal(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
+            cfg: AllocatorConfig) -> AllocationResult:
+    """Paper's minimum-tyre-load-ratio split, eq. (26)-(31) as corrected (module docstring).
+
+    t_nm: total wheel torque (N·m); mz_nm: yaw moment (N·m, + = left); fz_n, fy_n, mu:
+    per-wheel vertical load (N), lateral force (N, unused here) and adhesion, shape (4,).
+    Each wheel is finally clipped to ±max_motor_torque_nm.
+    """
+    inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+    return _finish(_clip_motor(_optimal_closed_form(inp, cfg), cfg), inp, cfg)
+
+
+def _optimal_closed_form(inp: _Inputs, cfg: AllocatorConfig) -> list[float]:
+    s_left, s_right = _side_demands(inp.t, inp.mz, cfg)
+    out = [0.0] * 4
+    for front, rear, s in ((_FL, _RL, s_left), (_FR, _RR, s_right)):
+        wf = inp.cap[front] * inp.cap[front]
+        wr = inp.cap[rear] * inp.cap[rear]
+        if wf + wr > 0.0:
+            t_rear = s * wr / (wf + wr)  # eq. (31), corrected
+            out[rear] = t_rear
+            out[front] = s - t_rear  # eq. (28), corrected
+    return out
+
+
+def rule(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
+         cfg: AllocatorConfig) -> AllocationResult:
+    """Conventional baseline: equal front/rear split of each side sum T/2 ∓ M_z r/B, clipped
+    to the motor limits. Arguments as :func:`optimal` (loads are checked but not used)."""
+    inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+    s_left, s_right = _side_demands(inp.t, inp.mz, cfg)
+    raw = [0.5 * s_left, 0.5 * s_right, 0.5 * s_left, 0.5 * s_right]
+    return _finish(_clip_motor(raw, cfg), inp, cfg)
+
+
+def equal(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
+          cfg: AllocatorConfig) -> AllocationResult:
+    """T/4 per wheel, clipped to the motor limits; M_z is not served (reported unmet)."""
+    inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+    q = 0.25 * inp.t
+    return _finish(_clip_motor([q, q, q, q], cfg), inp, cfg)
+
+
+def wheel_bounds_nm(fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
+                    cfg: AllocatorConfig) -> np.ndarray:
+    """Per-wheel torque bounds b_i (N·m, shape (4,)) used by :func:`optimal_bounded`:
+    |T_i| ≤ min(T_motor,max, r √max((μ_i F_zi)² − F_yi², 0)); 0 for a wheel in the air."""
+    inp = _prepare(0.0, 0.0, fz_n, fy_n, mu, cfg)
+    return np.array(_bounds(inp, cfg))
+
+
+def _bounds(inp: _Inputs, cfg: AllocatorConfig) -> list[float]:
+    lim = cfg.max_motor_torque_nm
+    r = cfg.wheel_radius_m
+    out = [0.0] * 4
+    for i in range(4):
+        c = inp.cap[i]
+        if c <= 0.0:
+            continue
+        if cfg.friction_circle:
+            fx_max = math.sqrt(max(c * c - inp.fy[i] * inp.fy[i], 0.0))
+            out[i] = min(lim, r * fx_max)
+        else:
+            out[i] = lim
+    return out
+
+
+def _achievable_sides(s_left: float, s_right: float, bl: float, br: float,
+                      priority: str) -> tuple[float, float]:
+    """Lexicographic projection of the side-sum demand onto |S_L| ≤ bl, |S_R| ≤ br."""
+    if -bl <= s_left <= bl and -br <= s_right <= br:
+        return s_left, s_right
+    if priority == "yaw_moment":
+        d = _clip(s_right - s_left, -(bl + br), bl + br)
+        lo = max(-bl, -br - d)
+        hi = min(bl, br - d)
+        sl = _clip(0.5 * ((s_left + s_right) - d), lo, hi)
+        return sl, sl + d
+    tot = _clip(s_left + s_right, -(bl + br), bl + br)
+    lo = max(-bl, tot - br)
+    hi = min(bl, tot + br)
+    sl = _clip(0.5 * (tot - (s_right - s_left)), lo, hi)
+    return sl, tot - sl
+
+
+def _split_side(s: float, wf: float, wr: float, bf: float, br: float) -> tuple[float, float]:
+    """min x_f²/w_f + x_r²/w_r s.t. x_f + x_r = s, |x_f| ≤ bf, |x_r| ≤ br (|s| ≤ bf + br)."""
+    if wf + wr <= 0.0:
+        return 0.0, 0.0
+    xr = s * wr / (wf + wr)
+    xf = s - xr
+    if abs(xr) > br:
+        xr = math.copysign(br, s)
+        xf = s - xr
+    elif abs(xf) > bf:
+        xf = math.copysign(bf, s)
+        xr = s - xf
+    return _clip(xf, -bf, bf), _clip(xr, -br, br)
+
+
+class BoundedQp:
+    """OSQP workspace for the final split of :func:`optimal_bounded` (set up once).
+
+    Variables x_i = T_i / T_motor,max; objective ½ Σ p_i x_i², p_i = (c_max/c_i)²
+    (∝ 1/(μ_i F_zi)², scaled so min p_i = 1); rows: the side sums x_fl + x_rl = S_L*/T_max
+    and x_fr + x_rr = S_R*/T_max (eq. 27 rewritten as in eq. 28), then |x_i| ≤ b_i/T_max.
+    A side whose sum is at the edge of its range (|S*| = b_f + b_r) has a single feasible
+    point, both wheels at their bounds; it is fixed through l = u on its bound rows and its
+    sum row is freed, so the QP handed to OSQP is never degenerate (polishing then finds the
+    exact active set). With both sides fixed OSQP is not called.
+    """
+
+    def __init__(self) -> None:
+        import osqp
+        import scipy.sparse as sp
+
+        p = sp.triu(sp.identity(4, format="csc")).tocsc()
+        a = sp.csc_matrix(np.vstack([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0], np.eye(4)]))
+        self._l = np.zeros(6)
+        self._u = np.zeros(6)
+        self._px = np.ones(4)
+        self._solver = osqp.OSQP()
+        self._solver.setup(p, np.zeros(4), a, self._l, self._u, verbose=False,
+                           polishing=True, warm_starting=True, eps_abs=1.0e-6,
+                           eps_rel=1.0e-6, max_iter=4000, polish_refine_iter=5,
+                           adaptive_rho_interval=10)
+        self.last_status = ""
+
+    def solve(self, s_left: float, s_right: float, cap: list[float], bounds: list[float],
+              scale: float) -> list[float] | None:
+        """Torques (N·m) with side sums exactly (s_left, s_right), or None on failure.
+
+        Needs |s_left| ≤ b_fl + b_rl and |s_right| ≤ b_fr + b_rr. ADMM runs to 1e-6 and
+        polishing (required; None otherwise) recovers the exact active-set solution. The
+        result is clipped to the bounds and its side-sum residual (~1e-13 after polishing;
+        > 1e-6 T_max is refused) moved onto the wheel of the side with the most room, so
+        the equalities hold to rounding.
+        """
+        c_max = max(cap)
+        px = self._px
+        for i in range(4):
+            px[i] = (c_max / cap[i]) ** 2 if cap[i] > 0.0 else 1.0
+        px /= px.min()
+        l, u = self._l, self._u
+        fixed = [False, False]
+        x_fixed = [0.0] * 4
+        for k, (front, rear, s) in enumerate(((_FL, _RL, s_left), (_FR, _RR, s_right))):
+            b_side = bounds[front] + bounds[rear]
+            u[2 + front] = bounds[front] / scale
+            l[2 + front] = -u[2 + front]
+            u[2 + rear] = bounds[rear] / scale
+            l[2 + rear] = -u[2 + rear]
+            if abs(s) >= b_side * (1.0 - 1.0e-12):
+                fixed[k] = True
+                x_fixed[front] = math.copysign(bounds[front], s)
+                x_fixed[rear] = math.copysign(bounds[rear], s)
+                l[2 + front] = u[2 + front] = x_fixed[front] / scale
+                l[2 + rear] = u[2 + rear] = x_fixed[rear] / scale
+                l[k], u[k] = -math.inf, math.inf
+            else:
+                l[k] = u[k] = s / scale
+        if fixed[0] and fixed[1]:
+            self.last_status = "fixed"
+            return x_fixed
+        if s_left == 0.0 and s_right == 0.0:
+            self.last_status = "zero"  # the unique optimum; OSQP's polish reports failure here
+            return [0.0] * 4
+        self._solver.update(Px=px, l=l, u=u)
+        res = self._solver.solve(raise_error=False)
+        self.last_status = str(res.info.status)
+        if res.info.status_val != 1 or res.info.status_polish != 1 or res.x is None:
+            return None
+        x = [_clip(float(res.x[i]) * scale, -bounds[i], bounds[i]) for i in range(4)]
+        if not all(math.isfinite(v) for v in x):
+            return None
+        for k, (front, rear, s) in enumerate(((_FL, _RL, s_left), (_FR, _RR, s_right))):
+            if fixed[k]:
+                x[front], x[rear] = x_fixed[front], x_fixed[rear]
+                continue
+            delta = s - (x[front] + x[rear])
+            if abs(delta) > _RESIDUAL_TOL * scale:
+                return None
+            if delta == 0.0:
+                continue
+            room_f = bounds[front] - x[front] if delta > 0.0 else x[front] + bounds[front]
+            room_r = bounds[rear] - x[rear] if delta > 0.0 else x[rear] + bounds[rear]
+            i = front if room_f >= room_r else rear
+            if abs(delta) > max(room_f, room_r):
+                return None
+            x[i] += delta
+        return x
+
+
+_DEFAULT_QP: BoundedQp | None = None
+
+
+def _default_qp() -> BoundedQp:
+    global _DEFAULT_QP
+    if _DEFAULT_QP is None:
+        _DEFAULT_QP = BoundedQp()
+    return _DEFAULT_QP
+
+
+def optimal_bounded(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,
+                    mu: np.ndarray, cfg: AllocatorConfig,
+                    qp: BoundedQp | None = None) -> AllocationResult:
+    """Minimum tyre-load-ratio split with motor and friction-circle bounds and a priority.
+
+    Arguments as :func:`optimal`; fy_n is used for the friction circle. ``qp`` is the OSQP
+    workspace for ``bounded_solver = "osqp"`` (a process-wide one is created when None).
+    """
+    inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+    b = _bounds(inp, cfg)
+    s_left, s_right = _side_demands(inp.t, inp.mz, cfg)
+    sl, sr = _achievable_sides(s_left, s_right, b[_FL] + b[_RL], b[_FR] + b[_RR],
+                               cfg.priority)
+    cap = inp.cap
+    flags: tuple[str, ...] = ()
+    torques: list[float] | None = None
+    if cfg.bounded_solver == "osqp" and any(v > 0.0 for v in b):
+        solver = qp if qp is not None else _default_qp()
+        torques = solver.solve(sl, sr, cap, b, cfg.max_motor_torque_nm)
+        if torques is None:
+            flags = ("solver_fallback",)
+    if torques is None:
+        xfl, xrl = _split_side(sl, cap[_FL] ** 2, cap[_RL] ** 2, b[_FL], b[_RL])
+        xfr, xrr = _split_side(sr, cap[_FR] ** 2, cap[_RR] ** 2, b[_FR], b[_RR])
+        torques = [xfl, xfr, xrl, xrr]
+    return _finish(torques, inp, cfg, flags)
+
+
+_METHODS = {"optimal": optimal, "rule": rule, "equal": equal}
+
+
+def allocate(method: str, t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,
+             mu: np.ndarray, cfg: AllocatorConfig,
+             qp: BoundedQp | None = None) -> AllocationResult:
+    """Dispatch to one of :data:`METHODS`; raises ``ValueError`` on an unknown method or a
+    bad input (see the module docstring)."""
+    if method == "optimal_bounded":
+        return optimal_bounded(t_nm, mz_nm, fz_n, fy_n, mu, cfg, qp)
+    fn = _METHODS.get(method)
+    if fn is None:
+        raise ValueError(f"allocation: method '{method}' is not one of {list(METHODS)}")
+    return fn(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+
+
+class TorqueAllocator:
+    """Stateful convenience for a node: a config plus its own OSQP workspace."""
+
+    def __init__(self, cfg: AllocatorConfig | None = None) -> None:
+        self.cfg = cfg if cfg is not None else AllocatorConfig()
+        self._qp = (BoundedQp() if self.cfg.method == "optimal_bounded"
+                    and self.cfg.bounded_solver == "osqp" else None)
+
+    def allocate(self, t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,
+                 mu: np.ndarray) -> AllocationResult:
+        """Allocate with ``cfg.method``; see :func:`allocate`."""
+        return allocate(self.cfg.method, t_nm, mz_nm, fz_n, fy_n, mu, self.cfg, self._qp)
