@@ -22,6 +22,7 @@ scenario's end, when the car leaves the road (``abort_lateral_error_m``) or spin
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -84,7 +85,9 @@ class PlantNode(Node):
         super().__init__("plant_node")
         self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
         cfg = self.params.config
-        self.scenario = load_scenario(cfg.scenario)
+        self.scenario = dataclasses.replace(
+            load_scenario(cfg.scenario), abort_lateral_error_m=cfg.abort_lateral_error_m,
+            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
         self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s)
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
@@ -127,8 +130,11 @@ class PlantNode(Node):
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
-        self.get_logger().info("parameters updated (scenario, mode and timing apply to the next "
-                               "run; abort limits apply now)")
+        self.scenario = dataclasses.replace(
+            self.scenario, abort_lateral_error_m=cfg.abort_lateral_error_m,
+            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
+        self.get_logger().info("parameters updated: abort limits apply now; scenario, mode "
+                               "and timing apply to the next run")
 
     # -- inputs --------------------------------------------------------------------------
     def _valid_cmd(self, msg: MpcCommand) -> bool:
@@ -189,9 +195,9 @@ class PlantNode(Node):
 
     def _advance(self) -> None:
         cfg = self.params.config
-        self._warn_clipping()
         self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1], self.torque_cmd,
                                      dt_s=cfg.dt_s)
+        self._warn_clipping()
         self.step_k += 1
         self.last_progress = time.monotonic()
         ended, reason, completed = self._end_check()
@@ -200,18 +206,15 @@ class PlantNode(Node):
             self._finish(completed, reason)
 
     def _warn_clipping(self) -> None:
-        lim_f, lim_r = self.sim.steer_limits_rad()
-        df, dr = self.steer_cmd
-        if abs(df) > lim_f or abs(dr) > lim_r:
-            self.clip_log(self._now_ns(), f"steer command ({math.degrees(df):.2f}°, "
-                          f"{math.degrees(dr):.2f}°) beyond the actuator limits "
-                          f"(±{math.degrees(lim_f):.0f}°, ±{math.degrees(lim_r):.0f}°): clipped")
+        if self.sim.last_clipped:
+            df, dr = self.steer_cmd
+            self.clip_log(self._now_ns(), f"commands beyond the actuator limits clipped: "
+                          f"{', '.join(self.sim.last_clipped)} (steer command "
+                          f"{math.degrees(df):.2f}°, {math.degrees(dr):.2f}°)")
 
     def _end_check(self) -> tuple[bool, str, bool]:
-        cfg = self.params.config
-        return self.scenario.end_check(
-            self.outputs, abort_lateral_error_m=cfg.abort_lateral_error_m,
-            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
+        ended, reason = self.scenario.check_end(self.outputs)
+        return ended, reason, ended and not reason.startswith("aborted")
 
     def _realtime_tick(self) -> None:
         if not self.done:

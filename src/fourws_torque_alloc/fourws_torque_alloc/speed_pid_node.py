@@ -21,7 +21,6 @@ from fourws_common.ros_params import ParamBinding
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
 from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
 
-
 # The period assumed for the first state (no previous stamp): the graph's 100 Hz.
 NOMINAL_DT_S = 0.01
 
