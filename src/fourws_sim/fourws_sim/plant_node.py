@@ -274,7 +274,7 @@ class PlantNode(Node):
         self.last_publish = time.monotonic()
 
     def _publish_reference(self) -> None:
-        ref = self.scenario.reference
+        ref = self.scenario.path
         msg = ReferenceTrajectory()
         msg.header.frame_id = "map"
         msg.x, msg.y = ref.x.tolist(), ref.y.tolist()
