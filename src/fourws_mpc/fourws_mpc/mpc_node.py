@@ -20,7 +20,7 @@ from fourws_common.conversions import RateLimitedLog, non_finite_fields, stamp_t
 from fourws_common.node_main import run_node
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
 from fourws_common.ros_params import ParamBinding
-from fourws_mpc.core.controller import MpcConfig, MpcController, measurement_from
+from fourws_mpc.core.controller import MpcConfig, MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
@@ -74,7 +74,7 @@ class MpcNode(Node):
         if self.ref is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
-        meas = measurement_from(**{k: getattr(msg, k) for k in STATE_FIELDS})
+        meas = VehicleSample(**{k: float(getattr(msg, k)) for k in STATE_FIELDS})
         t0 = time.perf_counter()
         res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref)
         solve_ms = (time.perf_counter() - t0) * 1e3

@@ -1,0 +1,196 @@
+"""The whole control loop in one process, without ROS: plant, MPC, speed PID, allocator.
+
+Same sequencing as the lockstep graph (design.md) at every step k::
+
+    outputs(k) ──► mpc.step(t_k, outputs(k))                 → δf, δr, Mz      (mpc_node)
+               ──► pid.step(v_ref(nearest point), vx, T)     → T_total         (speed_pid_node)
+               ──► allocate(method, T_total, Mz, fz, fy, μ)  → 4 wheel torques (allocator_node)
+               ──► plant.step(δf, δr, torques, T)            → outputs(k+1)    (plant_node)
+
+until the scenario ends (its ``check_end``: end X, duration, end of path, or an abort) or
+``max_steps``. Configuration comes from the same YAML files as the nodes:
+``fourws_mpc/config/mpc.yaml`` with the controller preset
+``fourws_bringup/config/controllers/<name>.yaml`` merged over it (``mpc_node`` and
+``allocator_node`` sections), ``fourws_torque_alloc/config/{speed_pid,allocator}.yaml`` and
+``fourws_sim/config/plant.yaml`` (period and RK4 substep).
+
+The core reads no clock. Pass ``clock`` (e.g. ``time.perf_counter``) to record the wall time
+of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fourws_bringup.core.metrics import run_metrics
+from fourws_common.params import from_mapping, load_ros_params_yaml
+from fourws_common.resources import config_dir
+from fourws_mpc.core.controller import MpcConfig, MpcController
+from fourws_mpc.core.reference import Reference
+from fourws_sim.core.scenario import Scenario, load_scenario
+from fourws_sim.core.simulator import Simulator
+from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
+from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
+
+STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
+                "steer_front", "steer_rear")
+WHEEL_FIELDS = ("wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")
+MPC_FIELDS = ("delta_front", "delta_rear", "yaw_moment", "np", "nc", "q_y", "q_phi",
+              "r_ddelta", "r_dmz", "lateral_error", "heading_error", "e_s", "k_e", "k_u",
+              "iterations", "slack", "fallback")
+
+
+@dataclass
+class ClosedLoopLog:
+    """Per-step arrays of a closed-loop run (SI). ``state`` holds every VehicleState field,
+    ``mpc`` the command and diagnostics, plus the drive demand and the wheel torque commands."""
+
+    scenario: str
+    controller: str
+    allocation: str
+    reference: Reference
+    state: dict[str, np.ndarray] = field(default_factory=dict)
+    mpc: dict[str, np.ndarray] = field(default_factory=dict)
+    solver_status: list[str] = field(default_factory=list)
+    drive_force_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drive_torque_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    wheel_torque_cmd_nm: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    solve_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    completed: bool = False
+    reason: str = ""
+    summary: str = ""
+
+    @property
+    def steps(self) -> int:
+        """Number of control steps taken."""
+        return len(self.drive_force_n)
+
+    def metrics(self) -> dict[str, Any]:
+        """metrics.json values of this run (errors recomputed from the poses)."""
+        s = self.state
+        m: dict[str, Any] = {"scenario": self.scenario, "controller": self.controller}
+        m.update(run_metrics(self.reference, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"],
+                             s["vy"], s["sideslip"], self.solve_ms))
+        m["completed"] = self.completed
+        m["reason"] = self.reason
+        return m
+
+
+def controller_preset_path(name_or_path: str) -> Path:
+    """``controllers/<name>.yaml`` of fourws_bringup, or the given file."""
+    p = Path(name_or_path)
+    if name_or_path.endswith((".yaml", ".yml")) or p.is_file():
+        return p
+    path = config_dir("fourws_bringup") / "controllers" / f"{name_or_path}.yaml"
+    if not path.is_file():
+        known = sorted(q.stem for q in path.parent.glob("*.yaml"))
+        raise ValueError(f"controller '{name_or_path}' not found in {path.parent} "
+                         f"(known: {', '.join(known)})")
+    return path
+
+
+def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) -> MpcConfig:
+    """mpc.yaml with the preset's ``mpc_node`` section (and ``overrides``) merged over it."""
+    values = load_ros_params_yaml(str(config_dir("fourws_mpc") / "mpc.yaml"), "mpc_node")
+    values.update(load_ros_params_yaml(str(controller_preset_path(controller)), "mpc_node"))
+    values.update(overrides or {})
+    return MpcConfig.from_mapping(values)
+
+
+def load_allocator_config(controller: str) -> AllocatorConfig:
+    """allocator.yaml with the preset's ``allocator_node`` section merged over it."""
+    values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
+                                  "allocator_node")
+    values.update(load_ros_params_yaml(str(controller_preset_path(controller)),
+                                       "allocator_node"))
+    return from_mapping(AllocatorConfig, values)
+
+
+def load_pid_config() -> SpeedPidConfig:
+    """speed_pid.yaml."""
+    values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "speed_pid.yaml"),
+                                  "speed_pid_node")
+    return from_mapping(SpeedPidConfig, values)
+
+
+def _plant_timing() -> tuple[float, float]:
+    values = load_ros_params_yaml(str(config_dir("fourws_sim") / "plant.yaml"), "plant_node")
+    return float(values.get("dt_s", 0.01)), float(values.get("substep_s", 0.001))
+
+
+def reference_of(scenario: Scenario, cfg: MpcConfig | None = None) -> Reference:
+    """The scenario's path as the MPC's :class:`Reference` (the ReferenceTrajectory arrays)."""
+    p = scenario.path
+    kw = {} if cfg is None else {"search_back": cfg.ref_search_back,
+                                 "search_ahead": cfg.ref_search_ahead}
+    return Reference.from_arrays(p.x, p.y, p.yaw, p.curvature, p.speed, **kw)
+
+
+def run_closed_loop(
+    scenario_name_or_path: str,
+    controller_name: str,
+    max_steps: int | None = None,
+    *,
+    mpc_overrides: dict[str, Any] | None = None,
+    clock: Callable[[], float] | None = None,
+) -> ClosedLoopLog:
+    """Run one scenario with one controller preset; see the module docstring.
+
+    ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests).
+    """
+    scenario = load_scenario(scenario_name_or_path)
+    mpc_cfg = load_mpc_config(controller_name, mpc_overrides)
+    alloc_cfg = load_allocator_config(controller_name)
+    dt, substep = _plant_timing()
+    if abs(dt - mpc_cfg.dt_s) > 1e-12:
+        raise ValueError(f"dt_s: plant period {dt} s differs from the MPC's {mpc_cfg.dt_s} s")
+    sim = Simulator.from_scenario(scenario, substep_s=substep)
+    mpc = MpcController(mpc_cfg)
+    pid = SpeedPid(load_pid_config())
+    alloc = TorqueAllocator(alloc_cfg)
+    ref = reference_of(scenario, mpc_cfg)
+
+    st: dict[str, list] = {k: [] for k in STATE_FIELDS + WHEEL_FIELDS}
+    mp: dict[str, list] = {k: [] for k in MPC_FIELDS}
+    status: list[str] = []
+    force, torque, wcmd, solve = [], [], [], []
+    out = sim.outputs()
+    done, reason = scenario.check_end(out)
+    k = 0
+    while not done and (max_steps is None or k < max_steps):
+        t0 = clock() if clock is not None else 0.0
+        res = mpc.step(out.t_s, out, ref, mu=float(np.mean(out.mu)))
+        solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
+        drive = pid.step(res.ref_speed, out.vx, dt)
+        a = alloc.allocate(drive.torque_nm, res.yaw_moment, out.fz, out.fy, out.mu)
+        for name in STATE_FIELDS + WHEEL_FIELDS:
+            st[name].append(np.array(getattr(out, name), dtype=float))
+        for name in MPC_FIELDS:
+            mp[name].append(getattr(res, name))
+        status.append(res.solver_status)
+        force.append(drive.force_n)
+        torque.append(drive.torque_nm)
+        wcmd.append(np.array(a.torque_nm, dtype=float))
+        out = sim.step(res.delta_front, res.delta_rear, a.torque_nm, dt)
+        k += 1
+        done, reason = scenario.check_end(out)
+    if not done:
+        reason = f"max_steps = {max_steps} reached"
+    log = ClosedLoopLog(
+        scenario=scenario.name, controller=mpc_cfg.controller, allocation=alloc_cfg.method,
+        reference=ref,
+        state={k_: np.array(v) for k_, v in st.items()},
+        mpc={k_: np.array(v) for k_, v in mp.items()},
+        solver_status=status,
+        drive_force_n=np.array(force), drive_torque_nm=np.array(torque),
+        wheel_torque_cmd_nm=np.array(wcmd).reshape(-1, 4), solve_ms=np.array(solve),
+        completed=bool(done and not reason.startswith("aborted")), reason=reason,
+        summary=scenario.summary(),
+    )
+    return log

@@ -1,0 +1,109 @@
+"""Tracking metrics of a run (the metrics.json keys of design.md), from per-step arrays.
+
+Lateral and heading errors are measured against the reference path geometry by
+:func:`path_errors` — nearest point with projection between samples, signed lateral offset
+(left positive) and heading error wrapped to (−π, π] (``fourws_mpc.core.reference``) — so the
+in-process closed loop and a recorded bag give the same numbers from the same poses.
+
+Definitions (n steps, errors e_k)::
+
+    max_abs = max |e_k|,   rmse = √(Σ e_k² / n),   mae = Σ |e_k| / n
+
+Angles are reported in degrees (keys ``*_deg``). ``mpc_solve_ms_p50``/``_p99`` are the 50th
+and 99th percentiles (linear interpolation) of the per-step MPC solve times; NaN when no time
+was measured.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from fourws_mpc.core.reference import Reference
+
+METRIC_KEYS = (
+    "max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
+    "max_abs_heading_error_deg", "rmse_heading_error_deg",
+    "max_abs_sideslip_deg", "rmse_sideslip_deg",
+    "mpc_solve_ms_p50", "mpc_solve_ms_p99",
+)
+
+
+def reference_from_arrays(x: Sequence[float], y: Sequence[float], yaw: Sequence[float],
+                          curvature: Sequence[float] | None = None,
+                          speed: Sequence[float] | None = None) -> Reference:
+    """A :class:`Reference` from path arrays (as in a ReferenceTrajectory message)."""
+    n = len(x)
+    return Reference.from_arrays(x, y, yaw,
+                                 np.zeros(n) if curvature is None else curvature,
+                                 np.zeros(n) if speed is None else speed)
+
+
+def path_errors(ref: Reference, x: Sequence[float], y: Sequence[float],
+                yaw: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Lateral (m, left +) and heading (rad) errors of poses (n,) against the path (n,), (n,).
+
+    Consecutive poses are searched in a window around the previous nearest index (global
+    search on the first pose or when the window's edge is hit).
+    """
+    xs, ys, yaws = (np.asarray(a, float).reshape(-1) for a in (x, y, yaw))
+    e_y = np.empty(len(xs))
+    e_phi = np.empty(len(xs))
+    hint: int | None = None
+    for k in range(len(xs)):
+        e = ref.errors(float(xs[k]), float(ys[k]), float(yaws[k]), hint)
+        hint = e.near.index
+        e_y[k] = e.lateral_error
+        e_phi[k] = e.heading_error
+    return e_y, e_phi
+
+
+def _stats(e: np.ndarray) -> tuple[float, float, float]:
+    if e.size == 0:
+        return math.nan, math.nan, math.nan
+    a = np.abs(e)
+    return float(a.max()), float(np.sqrt(np.mean(e * e))), float(a.mean())
+
+
+def compute_metrics(lateral_error: Sequence[float], heading_error: Sequence[float],
+                    sideslip: Sequence[float],
+                    solve_ms: Sequence[float] | None = None) -> dict[str, float]:
+    """The nine metric values of :data:`METRIC_KEYS` from per-step arrays (SI in, report out).
+
+    lateral_error (m), heading_error (rad), sideslip (rad), solve_ms (ms, optional).
+    """
+    ey = np.asarray(lateral_error, float).reshape(-1)
+    ephi = np.degrees(np.asarray(heading_error, float).reshape(-1))
+    beta = np.degrees(np.asarray(sideslip, float).reshape(-1))
+    m_ey, r_ey, a_ey = _stats(ey)
+    m_ph, r_ph, _ = _stats(ephi)
+    m_b, r_b, _ = _stats(beta)
+    t = np.asarray([] if solve_ms is None else solve_ms, float).reshape(-1)
+    t = t[np.isfinite(t)]
+    p50 = float(np.percentile(t, 50)) if t.size else math.nan
+    p99 = float(np.percentile(t, 99)) if t.size else math.nan
+    return {
+        "max_abs_lateral_error_m": m_ey, "rmse_lateral_error_m": r_ey,
+        "mae_lateral_error_m": a_ey,
+        "max_abs_heading_error_deg": m_ph, "rmse_heading_error_deg": r_ph,
+        "max_abs_sideslip_deg": m_b, "rmse_sideslip_deg": r_b,
+        "mpc_solve_ms_p50": p50, "mpc_solve_ms_p99": p99,
+    }
+
+
+def run_metrics(ref: Reference, t: Sequence[float], x: Sequence[float], y: Sequence[float],
+                yaw: Sequence[float], vx: Sequence[float], vy: Sequence[float],
+                sideslip: Sequence[float] | None = None,
+                solve_ms: Sequence[float] | None = None) -> dict[str, float]:
+    """Metrics of a run from its poses: errors by :func:`path_errors`, sideslip as recorded
+    (or atan2(vy, vx) when not given). Also returns ``steps`` and ``sim_time_s``."""
+    e_y, e_phi = path_errors(ref, x, y, yaw)
+    beta = (np.arctan2(np.asarray(vy, float), np.asarray(vx, float)) if sideslip is None
+            else np.asarray(sideslip, float))
+    out: dict[str, float] = compute_metrics(e_y, e_phi, beta, solve_ms)
+    tt = np.asarray(t, float)
+    out["steps"] = int(tt.size)
+    out["sim_time_s"] = float(tt[-1] - tt[0]) if tt.size else 0.0
+    return out

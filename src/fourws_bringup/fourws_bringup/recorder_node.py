@@ -1,0 +1,197 @@
+"""Recorder node: every topic of the graph, serialized as received, into a rosbag2-layout MCAP bag.
+
+Subscribes to each topic in ``topics`` with ``raw=True`` (no decode, no re-encode) and the QoS
+its publisher offers (``fourws_common.qos``: CONTROL_QOS per step, LATCHED_QOS for
+``/reference/*`` and ``/run/status``, CLOCK_QOS for ``/clock``), and appends every message to
+``output_dir`` through :class:`fourws_bringup.bag.BagWriter`: ``log_time`` = wall receive
+time (ns), ``publish_time`` = header stamp (receive time for ``/run/status``).
+
+Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
+messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten with the
+counts that are on disk, so a killed recorder loses at most the open chunk and leaves a
+recognisable bag (``fourws bag recover`` makes its MCAP whole again).
+
+Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
+arrived for ``drain_quiet_s`` (at most ``drain_max_s``), then ends, and ``destroy_node``
+finalises the file (last chunk, summary, footer) and writes the final ``metadata.yaml``,
+exactly once (also when rclpy shuts down first).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from fourws_common.node_main import run_node
+from fourws_common.params import param
+from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_common.ros_params import ParamBinding
+
+from .bag import DEFAULT_TOPICS, TOPICS, BagError, BagWriter, TopicInfo, topic_info
+
+KIND_QOS = {"control": CONTROL_QOS, "latched": LATCHED_QOS, "clock": CLOCK_QOS}
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    output_dir: str = param("", "bag folder to create (must not exist or be empty)")
+    chunk_size_bytes: int = param(262144, "uncompressed size of one MCAP chunk; a killed "
+                                  "recorder loses at most one chunk", lo=4096, hi=64 * 2**20,
+                                  unit="bytes")
+    compression: str = param("zstd", "chunk compression", choices=("zstd", "lz4", "none"))
+    drain_quiet_s: float = param(0.3, "after a stop request, end once no message has come "
+                                 "for this long", lo=0.0, hi=10.0, unit="s")
+    drain_max_s: float = param(2.0, "after a stop request, end after this long at most",
+                               lo=0.0, hi=60.0, unit="s")
+
+    def __post_init__(self) -> None:
+        if not self.output_dir:
+            raise ValueError("output_dir: must be set to the bag folder to create")
+        if self.drain_quiet_s > self.drain_max_s:
+            raise ValueError(f"drain_quiet_s ({self.drain_quiet_s}) must not exceed "
+                             f"drain_max_s ({self.drain_max_s})")
+
+
+def qos_of(info: TopicInfo) -> QoSProfile:
+    """The rclpy profile to subscribe a topic with: the graph's own profile when known."""
+    if info.name in TOPICS and TOPICS[info.name][0] == info.type:
+        return KIND_QOS[TOPICS[info.name][1]]
+    q = info.qos
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if q["history"] == "keep_all" else HistoryPolicy.KEEP_LAST,
+        depth=int(q["depth"]),
+        reliability=(ReliabilityPolicy.BEST_EFFORT if q["reliability"] == "best_effort"
+                     else ReliabilityPolicy.RELIABLE),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if q["durability"] == "transient_local"
+                    else DurabilityPolicy.VOLATILE))
+
+
+def qos_dict(profile: QoSProfile) -> dict:
+    """``history, depth, reliability, durability`` names of an rclpy profile (for the bag)."""
+    return {"history": "keep_all" if profile.history == HistoryPolicy.KEEP_ALL else "keep_last",
+            "depth": int(profile.depth),
+            "reliability": ("best_effort" if profile.reliability == ReliabilityPolicy.BEST_EFFORT
+                            else "reliable"),
+            "durability": ("transient_local"
+                           if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                           else "volatile")}
+
+
+def message_class(type_name: str):
+    """The generated Python class of ``pkg/msg/Type``."""
+    import importlib
+
+    pkg, _, name = type_name.split("/")
+    try:
+        return getattr(importlib.import_module(f"{pkg}.msg"), name)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(f"topics: message type {type_name} is not installed") from exc
+
+
+class RecorderNode(Node):
+    """Subscribes serialized, writes the bag; all storage logic is in fourws_bringup.bag."""
+
+    def __init__(self) -> None:
+        super().__init__("recorder_node")
+        self.done = False
+        self._lock = threading.Lock()
+        self._finalised = False
+        self.writer: BagWriter | None = None
+        self.params = ParamBinding(self, RecorderConfig)
+        self.declare_parameter("topics", list(DEFAULT_TOPICS))
+        self.add_on_set_parameters_callback(self._reject_runtime_change)
+        cfg = self.params.config
+        specs = self.get_parameter("topics").value
+        if not isinstance(specs, list | tuple) or not specs or not all(
+                isinstance(s, str) and s for s in specs):
+            raise ValueError(f"topics: expected a non-empty list of topic names, got {specs!r}")
+        infos = [topic_info(s) for s in specs]
+        names = [i.name for i in infos]
+        if len(set(names)) != len(names):
+            raise ValueError(f"topics: a topic is listed twice: {names}")
+        profiles = {}
+        for i, info in enumerate(infos):
+            profiles[info.name] = qos_of(info)
+            infos[i] = TopicInfo(info.name, info.type, qos_dict(profiles[info.name]))
+        classes = {info.name: message_class(info.type) for info in infos}
+        try:
+            self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
+                                    compression=cfg.compression, library="fourws recorder_node")
+        except (BagError, OSError) as exc:
+            raise ValueError(f"output_dir: cannot create the bag: {exc}") from exc
+        self.context.on_shutdown(self.finalise)
+        self.received = 0
+        self._last_rx = time.monotonic()
+        self._stop_requested_at: float | None = None
+        for info in infos:
+            self.create_subscription(classes[info.name], info.name, self._callback(info.name),
+                                     profiles[info.name], raw=True)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+        self.create_timer(0.05, self._check_stop)
+        self.get_logger().info(
+            f"recording {len(infos)} topics to {self.writer.path} (chunks of "
+            f"{cfg.chunk_size_bytes} bytes, {cfg.compression}): {', '.join(names)}")
+
+    def _reject_runtime_change(self, params):
+        from rcl_interfaces.msg import SetParametersResult
+
+        names = [p.name for p in params]
+        if any(n in ("topics", "output_dir", "chunk_size_bytes", "compression") for n in names):
+            return SetParametersResult(successful=False, reason="recorder parameters "
+                                       f"{names} apply at start only")
+        return SetParametersResult(successful=True)
+
+    def _callback(self, topic: str):
+        def on_message(data: bytes) -> None:
+            now = time.time_ns()
+            self._last_rx = time.monotonic()
+            with self._lock:
+                if self._finalised or self.writer is None:
+                    return
+                self.writer.write(topic, data, now)
+                self.received += 1
+        return on_message
+
+    def _on_signal(self, signum, _frame) -> None:
+        if self._stop_requested_at is None:
+            self._stop_requested_at = time.monotonic()
+        else:
+            self.done = True  # a second signal: stop draining
+
+    def _check_stop(self) -> None:
+        if self._stop_requested_at is None or self.done:
+            return
+        cfg = self.params.config
+        now = time.monotonic()
+        quiet = now - max(self._last_rx, self._stop_requested_at) >= cfg.drain_quiet_s
+        if quiet or now - self._stop_requested_at >= cfg.drain_max_s:
+            self.done = True
+
+    def finalise(self) -> None:
+        """Finish the MCAP file and write metadata.yaml; runs once, whoever calls first."""
+        with self._lock:
+            if self._finalised or self.writer is None:
+                return
+            self._finalised = True
+            self.writer.close()
+            counts = {k: r.message_count for k, r in self.writer.records.items()}
+        self.get_logger().info(f"bag {self.writer.folder} closed: {sum(counts.values())} "
+                               f"messages ({', '.join(f'{k} {v}' for k, v in counts.items())})")
+
+    def destroy_node(self) -> None:
+        self.finalise()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(RecorderNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,56 @@
+"""Write ``report.md`` for ``fourws paper``: tables beside the paper's, figures, run facts."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
+                 wall_s: float) -> Path:
+    """Tables, comparison figures per scenario (overlaying the controllers) and a run table."""
+    from .bag import read_run
+    from .report import draw_comparison
+
+    figs: dict[str, list[Path]] = {}
+    for scen in sorted({s for _c, s in results}):
+        runs = {}
+        for (ctrl, s), _m in results.items():
+            if s == scen and (out / f"{ctrl}@{s}" / "bag").exists():
+                try:
+                    runs[ctrl] = read_run(out / f"{ctrl}@{s}")
+                except Exception as exc:  # noqa: BLE001 - a bad bag must not stop the report
+                    print(f"[report] {ctrl}@{s}: {exc}", file=sys.stderr)
+        if runs:
+            figs[scen] = draw_comparison(runs, out / "figures" / scen, title=scen)
+    lines = [
+        "# fourws: the paper's scenarios over ROS 2 topics", "",
+        "Every number below is computed from the recorded bag of its run "
+        "(`fourws report RUN_DIR` recomputes it). The paper's plant is CarSim; ours is the "
+        "fourws_sim two-track model, so the paper's numbers are a reference for order of "
+        "magnitude and ranking, not a fit.", "",
+        tables, "",
+        "## Runs", "",
+        "| run | completed | reason | steps | sim time s | wall time s | RTF | MPC p50 ms "
+        "| MPC p99 ms | deadline misses | Np range | Nc range |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (ctrl, scen), m in results.items():
+        rtf = m.get("real_time_factor")
+        lines.append(
+            f"| {ctrl}@{scen} | {m.get('completed')} | {m.get('reason', '')} | "
+            f"{m.get('steps', '')} | {m.get('sim_time_s', float('nan')):.2f} | "
+            f"{m.get('wall_time_s', float('nan')):.1f} | "
+            f"{rtf if rtf is None else f'{rtf:.2f}'} | "
+            f"{m.get('mpc_solve_ms_p50', float('nan')):.2f} | "
+            f"{m.get('mpc_solve_ms_p99', float('nan')):.2f} | {m.get('deadline_misses', '')} | "
+            f"{m.get('np_min', '')}..{m.get('np_max', '')} | "
+            f"{m.get('nc_min', '')}..{m.get('nc_max', '')} |")
+    lines += ["", f"Total wall time of the {len(results)} runs: {wall_s:.0f} s.", ""]
+    for scen, paths in figs.items():
+        lines += [f"## Figures: {scen}", ""]
+        lines += [f"![{p.stem}]({p.relative_to(out).as_posix()})" for p in paths]
+        lines.append("")
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path

@@ -1,0 +1,186 @@
+"""3-DOF single-track prediction model of the 4WS vehicle, eq. (1)-(4), with exact Jacobians.
+
+State ζ = [ẏ, ẋ, φ, φ̇, Y, X] = [vy, vx, φ, r, Y, X] (:class:`StateIdx`), input
+u = [δf, δr, Mz] (:class:`InputIdx`), SI units (m/s, rad, rad/s, m, N·m).
+
+Nonlinear model, eq. (1), with per-tyre cornering stiffnesses C_cf, C_cr (two tyres per axle,
+hence the factor 2) and linear tyres::
+
+    α_f = δf − (vy + a r)/vx,      α_r = δr − (vy − b r)/vx
+    v̇x = 2/m [C_lf S_f + C_lr S_r − C_cf α_f δf − C_cr α_r δr] + vy r
+    v̇y = 2/m [C_cf α_f + C_cr α_r] − vx r
+    ṙ  = 2/Iz [a C_cf α_f − b C_cr α_r] + Mz/Iz
+    φ̇  = r
+    Ẏ  = vx sin φ + vy cos φ
+    Ẋ  = vx cos φ − vy sin φ
+
+Deviations from the printed paper (see ``paper-notes.md``):
+
+* eq. (1) writes Mz inside ``2/Iz [...]``; the yaw moment enters as Mz/Iz (implemented).
+* The printed B_t drops the factor 2 and the sign of the rear-steer yaw term; the Jacobians
+  here are derived from eq. (1) analytically: ∂v̇y/∂δf = 2C_cf/m, ∂v̇y/∂δr = 2C_cr/m,
+  ∂ṙ/∂δf = 2aC_cf/Iz, ∂ṙ/∂δr = −2bC_cr/Iz, ∂ṙ/∂Mz = 1/Iz (tested against central finite
+  differences of :func:`dynamics`).
+* The printed A_t has several slips (a missing factor 2 in the ẍ row, the Y/X rows with
+  swapped vy/vx columns); A_t here is the exact Jacobian of eq. (1).
+* The longitudinal slip ratios S_f, S_r are parameters (default 0: the speed is held by the
+  PID of eq. (24), which the lateral MPC does not model).
+* vx is floored at ``min_speed_mps`` inside the slip angles (assumption (5) of section 2).
+
+Linearisation and discretisation, eq. (3)-(4), with an affine term so that the model is exact
+at the operating point (ζ0, u0)::
+
+    ζ̇ ≈ f(ζ0, u0) + A_t (ζ − ζ0) + B_t (u − u0)
+    ζ(k+1) = A_k ζ(k) + B_k u(k) + d_k,   A_k = I + T A_t,  B_k = T B_t,
+    d_k = T [f(ζ0, u0) − A_t ζ0 − B_t u0]                                   # eq. (4)
+
+(The paper's eq. (3)-(4) keep the same constant term implicitly as ζ̄(t).)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+N_STATE = 6
+N_INPUT = 3
+
+
+class StateIdx(IntEnum):
+    """Indices of the prediction-model state ζ = [ẏ, ẋ, φ, φ̇, Y, X]."""
+
+    VY = 0
+    VX = 1
+    PHI = 2
+    R = 3
+    Y = 4
+    X = 5
+
+
+class InputIdx(IntEnum):
+    """Indices of the model input u = [δf, δr, Mz]."""
+
+    DF = 0
+    DR = 1
+    MZ = 2
+
+
+@dataclass(frozen=True, slots=True)
+class ModelParams:
+    """Parameters of eq. (1) in SI units; C_cf, C_cr, C_lf, C_lr are per tyre."""
+
+    mass_kg: float = 750.0
+    yaw_inertia_kgm2: float = 750.0
+    a_m: float = 1.10
+    b_m: float = 1.25
+    c_cf: float = 28000.0
+    c_cr: float = 30000.0
+    c_lf: float = 50000.0
+    c_lr: float = 50000.0
+    slip_front: float = 0.0
+    slip_rear: float = 0.0
+    min_speed_mps: float = 1.0
+
+
+def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
+    """Nonlinear right-hand side f(ζ, u) of eq. (1) (with Mz/Iz). Shapes (6,), (3,) → (6,)."""
+    vy, vx, phi, r = zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.PHI], zeta[StateIdx.R]
+    df, dr, mz = u[InputIdx.DF], u[InputIdx.DR], u[InputIdx.MZ]
+    vxs = max(vx, p.min_speed_mps)
+    af = df - (vy + p.a_m * r) / vxs
+    ar = dr - (vy - p.b_m * r) / vxs
+    out = np.empty(N_STATE)
+    out[StateIdx.VY] = 2.0 / p.mass_kg * (p.c_cf * af + p.c_cr * ar) - vx * r
+    out[StateIdx.VX] = 2.0 / p.mass_kg * (
+        p.c_lf * p.slip_front + p.c_lr * p.slip_rear - p.c_cf * af * df - p.c_cr * ar * dr
+    ) + vy * r
+    out[StateIdx.PHI] = r
+    out[StateIdx.R] = 2.0 / p.yaw_inertia_kgm2 * (p.a_m * p.c_cf * af - p.b_m * p.c_cr * ar) + (
+        mz / p.yaw_inertia_kgm2
+    )
+    s, c = np.sin(phi), np.cos(phi)
+    out[StateIdx.Y] = vx * s + vy * c
+    out[StateIdx.X] = vx * c - vy * s
+    return out
+
+
+def jacobians(
+    zeta: np.ndarray, u: np.ndarray, p: ModelParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact continuous-time Jacobians of eq. (1) at (ζ, u).
+
+    Returns ``(f0, A_t, B_t)``: f(ζ, u) (6,), ∂f/∂ζ (6, 6), ∂f/∂u (6, 3). When vx is below
+    ``min_speed_mps`` the slip angles use the floored speed and their vx-derivatives vanish.
+    """
+    S, I = StateIdx, InputIdx
+    vy, vx, phi, r = zeta[S.VY], zeta[S.VX], zeta[S.PHI], zeta[S.R]
+    df, dr = u[I.DF], u[I.DR]
+    m, iz, a, b = p.mass_kg, p.yaw_inertia_kgm2, p.a_m, p.b_m
+    cf, cr = p.c_cf, p.c_cr
+    floored = vx < p.min_speed_mps
+    vxs = p.min_speed_mps if floored else vx
+    wf = (vy + a * r) / vxs
+    wr = (vy - b * r) / vxs
+    af = df - wf
+    ar = dr - wr
+    # partial derivatives of the slip angles
+    daf_dvy, dar_dvy = -1.0 / vxs, -1.0 / vxs
+    daf_dr, dar_dr = -a / vxs, b / vxs
+    daf_dvx, dar_dvx = (0.0, 0.0) if floored else (wf / vxs, wr / vxs)
+
+    f0 = dynamics(zeta, u, p)
+    A = np.zeros((N_STATE, N_STATE))
+    B = np.zeros((N_STATE, N_INPUT))
+    k = 2.0 / m
+    A[S.VY, S.VY] = k * (cf * daf_dvy + cr * dar_dvy)
+    A[S.VY, S.VX] = k * (cf * daf_dvx + cr * dar_dvx) - r
+    A[S.VY, S.R] = k * (cf * daf_dr + cr * dar_dr) - vx
+    B[S.VY, I.DF] = k * cf
+    B[S.VY, I.DR] = k * cr
+
+    A[S.VX, S.VY] = -k * (cf * df * daf_dvy + cr * dr * dar_dvy) + r
+    A[S.VX, S.VX] = -k * (cf * df * daf_dvx + cr * dr * dar_dvx)
+    A[S.VX, S.R] = -k * (cf * df * daf_dr + cr * dr * dar_dr) + vy
+    B[S.VX, I.DF] = -k * cf * (af + df)
+    B[S.VX, I.DR] = -k * cr * (ar + dr)
+
+    A[S.PHI, S.R] = 1.0
+
+    kz = 2.0 / iz
+    A[S.R, S.VY] = kz * (a * cf * daf_dvy - b * cr * dar_dvy)
+    A[S.R, S.VX] = kz * (a * cf * daf_dvx - b * cr * dar_dvx)
+    A[S.R, S.R] = kz * (a * cf * daf_dr - b * cr * dar_dr)
+    B[S.R, I.DF] = kz * a * cf
+    B[S.R, I.DR] = -kz * b * cr
+    B[S.R, I.MZ] = 1.0 / iz
+
+    s, c = np.sin(phi), np.cos(phi)
+    A[S.Y, S.VY] = c
+    A[S.Y, S.VX] = s
+    A[S.Y, S.PHI] = vx * c - vy * s
+    A[S.X, S.VY] = -s
+    A[S.X, S.VX] = c
+    A[S.X, S.PHI] = -vx * s - vy * c
+    return f0, A, B
+
+
+def discretise(
+    zeta0: np.ndarray, u0: np.ndarray, p: ModelParams, dt_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward-Euler LTV model of eq. (4) linearised at (ζ0, u0).
+
+    Returns ``(A_k, B_k, d_k)`` with ζ(k+1) = A_k ζ + B_k u + d_k, exact at (ζ0, u0):
+    A_k = I + T A_t (6, 6), B_k = T B_t (6, 3), d_k = T (f0 − A_t ζ0 − B_t u0) (6,).
+    """
+    f0, At, Bt = jacobians(zeta0, u0, p)
+    Ak = np.eye(N_STATE) + dt_s * At
+    Bk = dt_s * Bt
+    dk = dt_s * (f0 - At @ zeta0 - Bt @ u0)
+    return Ak, Bk, dk
+
+
+def euler_step(zeta: np.ndarray, u: np.ndarray, p: ModelParams, dt_s: float) -> np.ndarray:
+    """One forward-Euler step of the nonlinear model: ζ + T f(ζ, u). Shape (6,)."""
+    return zeta + dt_s * dynamics(zeta, u, p)

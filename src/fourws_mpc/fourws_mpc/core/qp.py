@@ -1,0 +1,324 @@
+"""Augmented Δu MPC of eq. (5)-(6), cost eq. (16)-(19), constraints eq. (20); solved with OSQP.
+
+Augmented model, eq. (5), with the affine term of the linearisation (``model.discretise``)::
+
+    ξ = [ζ; u(k−1)] (9),  Ã = [[A_k, B_k], [0, I]],  B̃ = [[B_k], [I]],  d̃ = [d_k; 0]
+    ξ(k+1) = Ã ξ(k) + B̃ Δu(k) + d̃
+
+Prediction over i = 1..Np with Δu(k+j) = 0 for j ≥ Nc, eq. (6) plus the affine column::
+
+    y(k+i) = C Ã^i ξ(k) + Σ_{j<min(i,Nc)} C Ã^{i−1−j} B̃ Δu(k+j) + Σ_{m<i} C Ã^m d̃
+    Y = Ψ ξ + Θ ΔU + Γ d̃
+
+C picks the rows [φ, Y, vy, r] of ξ: φ and Y are the outputs of eq. (5) (cost and soft bounds),
+vy and r carry the hard bounds. The matrix powers Ã^0..Ã^Np are built by doubling with batched
+``matmul`` (⌈log2 Np⌉ calls), Θ by fancy-indexing the Markov parameters C Ã^m B̃ into a block
+Toeplitz array, Γ by a cumulative sum; no Python loop runs over horizon steps.
+
+Cost, eq. (16)-(19), with the increments indexed k..k+Nc−1 (the printed eq. (16) sums from
+i = 1 to Nc−1, one increment short; paper-notes)::
+
+    J = Σ_{i=1..Np} ‖y_i − y_ref,i‖²_Q + Σ_{j=0..Nc−1} ‖Δu_j‖²_R + ρ ε²
+
+Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
+by the squares of the characteristic sizes of the cost scaling, see ``controller.py``). The QP
+variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
+increment is in [−1, 1] and the problem is well scaled; ε ≥ 0 is one dimensionless slack.
+
+Constraints, eq. (20) and section 3.1.5 (rows of the OSQP matrix, in this order)::
+
+    −1 ≤ Δũ_j ≤ 1                         (0 ≤ Δũ ≤ 0 for a disabled input: δr or Mz ≡ 0)
+    0 ≤ ε
+    u_min − u(k−1) ≤ Σ_{l≤j} D Δũ_l ≤ u_max − u(k−1)
+    |vy_i| ≤ vy_max,  |r_i| ≤ r_max       hard (sideslip β ≈ vy/vx and yaw-rate bounds)
+    |φ_i − φ_ref,i| ≤ b_φ (1 + ε),  |Y_i − Y_ref,i| ≤ b_Y (1 + ε)     soft, eq. (20)
+
+Disabled inputs keep their columns and are pinned by equal bounds, so every controller shares
+one sparsity pattern per (Np, Nc). One OSQP instance per (Np, Nc) ever used is kept in a dict;
+each step updates P, q, A, l, u in place (fixed pattern, explicit zeros kept) and warm-starts
+from the shifted previous plan. Only OSQP status "solved" (and "solved inaccurate" when
+``accept_inaccurate``) is trusted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
+
+N_AUG = N_STATE + N_INPUT
+#: rows of the augmented state picked by C: outputs (φ, Y) then hard-bounded states (vy, r)
+OUT_ROWS = (StateIdx.PHI, StateIdx.Y, StateIdx.VY, StateIdx.R)
+N_OUT = len(OUT_ROWS)
+_INF = np.inf
+
+
+def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Augmented matrices of eq. (5): Ã (9, 9), B̃ (9, 3), d̃ (9,)."""
+    Aa = np.zeros((N_AUG, N_AUG))
+    Aa[:N_STATE, :N_STATE] = Ak
+    Aa[:N_STATE, N_STATE:] = Bk
+    Aa[N_STATE:, N_STATE:] = np.eye(N_INPUT)
+    Ba = np.vstack([Bk, np.eye(N_INPUT)])
+    da = np.concatenate([dk, np.zeros(N_INPUT)])
+    return Aa, Ba, da
+
+
+def output_matrix(rows: tuple[int, ...] = OUT_ROWS) -> np.ndarray:
+    """C̃ picking ``rows`` of the augmented state, shape (len(rows), 9)."""
+    C = np.zeros((len(rows), N_AUG))
+    C[np.arange(len(rows)), list(rows)] = 1.0
+    return C
+
+
+def matrix_powers(A: np.ndarray, n: int) -> np.ndarray:
+    """A^0..A^n stacked, shape (n+1, d, d), by doubling (⌈log2 n⌉ batched matmuls)."""
+    d = A.shape[0]
+    P = np.empty((n + 1, d, d))
+    P[0] = np.eye(d)
+    if n == 0:
+        return P
+    P[1] = A
+    have = 1
+    while have < n:
+        k = min(have, n - have)
+        P[have + 1:have + 1 + k] = P[have] @ P[1:1 + k]
+        have += k
+    return P
+
+
+def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int, n_c: int
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ψ (no·Np, 9), Θ (no·Np, 3·Nc) of eq. (6) and Γ (no·Np, 9) of the affine term.
+
+    Rows are ordered step-major (i = 1..Np, then the no outputs of C); columns of Θ step-major
+    (j = 0..Nc−1, then the 3 inputs). Y = Ψ ξ + Θ ΔU + Γ d̃.
+    """
+    no = C.shape[0]
+    nu = Ba.shape[1]
+    P = matrix_powers(Aa, n_p)
+    CP = C @ P                                   # (Np+1, no, 9): C Ã^m
+    psi = CP[1:].reshape(no * n_p, -1)
+    G = CP[:n_p] @ Ba                            # (Np, no, nu): C Ã^m B̃, m = 0..Np−1
+    m = np.arange(n_p)[:, None] - np.arange(n_c)[None, :]   # i−1−j
+    valid = m >= 0
+    blocks = G[np.where(valid, m, 0)] * valid[:, :, None, None]   # (Np, Nc, no, nu)
+    theta = blocks.transpose(0, 2, 1, 3).reshape(no * n_p, nu * n_c)
+    gamma = np.cumsum(CP[:n_p], axis=0).reshape(no * n_p, -1)
+    return psi, theta, gamma
+
+
+@dataclass(frozen=True)
+class QpSettings:
+    """OSQP settings shared by every (Np, Nc) instance."""
+
+    eps_abs: float = 1e-4
+    eps_rel: float = 1e-4
+    max_iter: int = 4000
+    polishing: bool = False
+    accept_inaccurate: bool = False
+
+
+@dataclass(frozen=True)
+class QpBounds:
+    """Bounds of eq. (20) in SI units; ``enabled[c]`` False pins input c to zero."""
+
+    du_max: np.ndarray           # (3,) |Δu| per step
+    u_max: np.ndarray            # (3,) |u|
+    enabled: np.ndarray          # (3,) bool
+    vy_max: float                # m/s, hard, from the sideslip bound
+    r_max: float                 # rad/s, hard
+    band_phi: float              # rad, soft
+    band_y: float                # m, soft
+    state_bounds: bool = True
+
+
+@dataclass
+class QpSolution:
+    """Result of one QP solve; ``du``/``u`` are (Nc, 3) SI plans, valid only when ``ok``."""
+
+    ok: bool
+    status: str
+    iterations: int
+    du: np.ndarray
+    u: np.ndarray
+    slack: float
+    du_scaled: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class _Instance:
+    """One OSQP problem with the fixed sparsity pattern of a (Np, Nc) pair."""
+
+    def __init__(self, n_p: int, n_c: int, settings: QpSettings) -> None:
+        self.n_p, self.n_c = n_p, n_c
+        nu = N_INPUT
+        nz = nu * n_c + 1
+        self.nz = nz
+        # P pattern: full upper triangle of the ΔŨ block, plus the slack diagonal
+        iu, ju = np.triu_indices(nu * n_c)
+        p_rows = np.concatenate([iu, [nz - 1]])
+        p_cols = np.concatenate([ju, [nz - 1]])
+        self.p_rows, self.p_cols, P = _csc_pattern(p_rows, p_cols, (nz, nz))
+        # A pattern
+        mask = self._a_mask()
+        ar, ac = np.nonzero(mask)
+        self.a_rows, self.a_cols, A = _csc_pattern(ar, ac, mask.shape)
+        self.m = mask.shape[0]
+        self.solver = osqp.OSQP()
+        self.solver.setup(
+            P, np.zeros(nz), A, -np.ones(self.m), np.ones(self.m),
+            eps_abs=settings.eps_abs, eps_rel=settings.eps_rel, max_iter=settings.max_iter,
+            polishing=settings.polishing, warm_starting=True, verbose=False,
+        )
+        self.last_x: np.ndarray | None = None
+        self.uses = 0
+
+    def _a_mask(self) -> np.ndarray:
+        n_p, n_c, nu = self.n_p, self.n_c, N_INPUT
+        ncol = nu * n_c
+        # block-triangular pattern of Θ in time (step i reaches increments j ≤ i−1)
+        step_mask = (np.arange(n_p)[:, None] >= np.arange(n_c)[None, :])
+        th2 = np.repeat(np.repeat(step_mask, 2, axis=0), nu, axis=1)       # 2 rows per step
+        cum = np.kron(np.tril(np.ones((n_c, n_c), bool)), np.eye(nu, dtype=bool))
+        eye = np.eye(ncol, dtype=bool)
+        z = np.zeros
+        top = np.hstack([eye, z((ncol, 1), bool)])
+        eps_row = np.hstack([z((1, ncol), bool), np.ones((1, 1), bool)])
+        ub = np.hstack([cum, z((ncol, 1), bool)])
+        hard = np.hstack([th2, z((2 * n_p, 1), bool)])
+        soft = np.hstack([th2, np.ones((2 * n_p, 1), bool)])
+        return np.vstack([top, eps_row, ub, hard, soft, soft])
+
+
+def _csc_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]
+                 ) -> tuple[np.ndarray, np.ndarray, sp.csc_matrix]:
+    """Rows/cols of a pattern in CSC storage order and a CSC matrix of ones with it."""
+    order = np.lexsort((rows, cols))
+    r, c = rows[order], cols[order]
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=shape[1]))])
+    M = sp.csc_matrix((np.ones(len(r)), r.astype(np.int64), indptr), shape=shape)
+    return r, c, M
+
+
+class MpcQp:
+    """Builds and solves the MPC QP; keeps one warm-started OSQP instance per (Np, Nc)."""
+
+    def __init__(self, settings: QpSettings | None = None) -> None:
+        self.settings = settings if settings is not None else QpSettings()
+        self.instances: dict[tuple[int, int], _Instance] = {}
+        self._C = output_matrix()
+
+    def instance(self, n_p: int, n_c: int) -> _Instance:
+        """The OSQP instance of (Np, Nc), created on first use and kept."""
+        key = (int(n_p), int(n_c))
+        inst = self.instances.get(key)
+        if inst is None:
+            inst = _Instance(key[0], key[1], self.settings)
+            self.instances[key] = inst
+        return inst
+
+    def solve(
+        self,
+        Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray,
+        zeta0: np.ndarray, u_prev: np.ndarray,
+        ref: np.ndarray, n_p: int, n_c: int,
+        q_eff: np.ndarray, r_eff: np.ndarray, rho: float,
+        bounds: QpBounds,
+        warm_du_scaled: np.ndarray | None = None,
+    ) -> QpSolution:
+        """Solve one MPC step.
+
+        Ak (6,6), Bk (6,3), dk (6,): model of eq. (4); zeta0 (6,), u_prev (3,) = u(k−1);
+        ref (Np, 2): [φ_ref, Y_ref] at i = 1..Np; q_eff (2,) = [q_φ, q_Y] and r_eff (3,) the
+        effective weights of the scaled cost; rho the slack weight; warm_du_scaled (Nc, 3)
+        optional primal warm start in units of Δu_max.
+        """
+        nu = N_INPUT
+        Aa, Ba, da = augment(Ak, Bk, dk)
+        xi = np.concatenate([zeta0, u_prev])
+        psi, theta, gamma = prediction_matrices(Aa, Ba, self._C, n_p, n_c)
+        free = (psi @ xi + gamma @ da).reshape(n_p, N_OUT)
+        D = np.tile(bounds.du_max, n_c)
+        th = (theta * D[None, :]).reshape(n_p, N_OUT, nu * n_c)
+        th_out = th[:, :2, :].reshape(2 * n_p, -1)       # φ, Y rows
+        th_hard = th[:, 2:, :].reshape(2 * n_p, -1)      # vy, r rows
+        e_free = (free[:, :2] - ref).reshape(-1)
+
+        w = np.tile(q_eff, n_p)
+        r_s = np.tile(r_eff, n_c) * D * D
+        H = 2.0 * (th_out.T @ (w[:, None] * th_out))
+        H[np.diag_indices_from(H)] += 2.0 * r_s
+        qvec = np.concatenate([2.0 * th_out.T @ (w * e_free), [0.0]])
+
+        inst = self.instance(n_p, n_c)
+        Px = np.concatenate([H[inst.p_rows[:-1], inst.p_cols[:-1]], [2.0 * rho]])
+        # dense A in the row order of _Instance._a_mask
+        ncol = nu * n_c
+        band = np.tile([bounds.band_phi, bounds.band_y], n_p)
+        cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(nu)) * D[None, :]
+        A = np.zeros((inst.m, ncol + 1))
+        A[:ncol, :ncol] = np.eye(ncol)
+        A[ncol, ncol] = 1.0
+        A[ncol + 1:2 * ncol + 1, :ncol] = cum
+        o = 2 * ncol + 1
+        A[o:o + 2 * n_p, :ncol] = th_hard
+        o2 = o + 2 * n_p
+        A[o2:o2 + 2 * n_p, :ncol] = th_out
+        A[o2:o2 + 2 * n_p, ncol] = -band
+        o3 = o2 + 2 * n_p
+        A[o3:o3 + 2 * n_p, :ncol] = th_out
+        A[o3:o3 + 2 * n_p, ncol] = band
+        Ax = A[inst.a_rows, inst.a_cols]
+
+        en = np.tile(bounds.enabled.astype(float), n_c)
+        u_prev_t = np.tile(u_prev, n_c)
+        u_max_t = np.tile(bounds.u_max, n_c)
+        hard_free = free[:, 2:].reshape(-1)
+        hard_lim = np.tile([bounds.vy_max, bounds.r_max], n_p)
+        if not bounds.state_bounds:
+            hard_lim = np.full(2 * n_p, _INF)
+        lo = np.concatenate([
+            -en, [0.0],
+            -u_max_t - u_prev_t,
+            -hard_lim - hard_free,
+            np.full(2 * n_p, -_INF),
+            -band - e_free,
+        ])
+        hi = np.concatenate([
+            en, [_INF],
+            u_max_t - u_prev_t,
+            hard_lim - hard_free,
+            band - e_free,
+            np.full(2 * n_p, _INF),
+        ])
+        # a u(k−1) outside its bound (never produced here) must not make l > u
+        lo = np.minimum(lo, hi)
+
+        s = inst.solver
+        s.update(q=qvec, l=lo, u=hi, Px=Px, Ax=Ax)
+        if warm_du_scaled is not None:
+            x0 = np.concatenate([np.clip(warm_du_scaled.reshape(-1), -en, en), [0.0]])
+            s.warm_start(x=x0)
+        res = s.solve(raise_error=False)
+        inst.uses += 1
+        status = str(res.info.status)
+        x = res.x
+        trusted = status == "solved" or (self.settings.accept_inaccurate
+                                         and status == "solved inaccurate")
+        ok = bool(trusted and x is not None and np.all(np.isfinite(x)))
+        if not ok:
+            s.warm_start(x=np.zeros(inst.nz), y=np.zeros(inst.m))
+            empty = np.zeros((n_c, nu))
+            return QpSolution(False, status, int(res.info.iter), empty, empty, 0.0,
+                              np.zeros((n_c, nu)))
+        dus = np.clip(x[:ncol], -en, en).reshape(n_c, nu)
+        du = dus * bounds.du_max[None, :]
+        u = np.clip(u_prev[None, :] + np.cumsum(du, axis=0),
+                    -bounds.u_max[None, :], bounds.u_max[None, :])
+        inst.last_x = x
+        return QpSolution(True, status, int(res.info.iter), du, u, max(float(x[-1]), 0.0), dus)

@@ -1,0 +1,208 @@
+"""Reference trajectory: nearest point, path-frame errors and the horizon's reference outputs.
+
+The reference comes as arrays x, y, yaw, curvature, speed at fine spacing (as in the
+ReferenceTrajectory message); the arc length s is their cumulative chord length.
+
+Nearest point: every segment p_i → p_{i+1} in a window around the previous index (or all
+segments on the first call, or when the best lies on the window's edge) is projected on,
+t = clip((p − p_i)·d / |d|², 0, 1); the closest projection wins. Beyond the first/last
+sample the projection continues along the end segments (t unclipped there), so s may leave
+[0, s_end]. Errors in the path frame at the projection::
+
+    e_Y = d̂ × (p − p_i)        (signed lateral offset, left of the path positive)
+    e_φ = wrap(ψ − ψ_ref(s))    wrapped to (−π, π]
+
+Reference outputs over the horizon at the preview arc lengths s + vx T i, i = 1..Np
+(linear interpolation of x, y and the unwrapped yaw; straight extrapolation beyond the ends):
+
+* ``frame="path"`` (what the controller uses): coordinates in the frame whose origin is the
+  projection point and whose X axis is the path tangent ψ0 there; Y_ref,i is the rotated
+  offset, φ_ref,i = ψ_ref,i − ψ0. The vehicle is then at X = 0 (to first order), Y = e_Y,
+  φ = e_φ. A rigid transform of the paper's global frame: the model of eq. (1) is invariant
+  to it, while the linearisation of sin φ / cos φ stays near φ = 0 on any path.
+* ``frame="global"``: the paper's Y and φ in the map frame, with φ_ref shifted by a multiple
+  of 2π so that it is within π of the vehicle's yaw.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
+    """Wrap to (−π, π]."""
+    w = np.mod(np.asarray(a, float) + math.pi, TWO_PI) - math.pi
+    w = np.where(w == -math.pi, math.pi, w)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+@dataclass(frozen=True, slots=True)
+class NearestPoint:
+    """Projection of a position on the reference path."""
+
+    index: int            # start sample of the segment
+    s: float              # m, arc length of the projection
+    x: float
+    y: float
+    yaw: float            # rad, path heading at s (unwrapped as in the arrays)
+    curvature: float      # 1/m
+    speed: float          # m/s
+    lateral_error: float  # m, left positive
+
+
+@dataclass(frozen=True, slots=True)
+class PathErrors:
+    """Lateral and heading error of a pose to the path, with the projection point."""
+
+    lateral_error: float   # m
+    heading_error: float   # rad, (−π, π]
+    near: NearestPoint
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """Immutable reference path with arc length; build with :meth:`from_arrays`."""
+
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+    curvature: np.ndarray
+    speed: np.ndarray
+    s: np.ndarray
+    search_back: int = 50
+    search_ahead: int = 400
+
+    @classmethod
+    def from_arrays(cls, x, y, yaw, curvature, speed, *, search_back: int = 50,
+                    search_ahead: int = 400) -> Reference:
+        """Validate and build. Arrays of one length N ≥ 2, finite, distinct consecutive points.
+
+        Raises ``ValueError`` naming the bad array.
+        """
+        arrs = {}
+        for name, a in (("x", x), ("y", y), ("yaw", yaw), ("curvature", curvature),
+                        ("speed", speed)):
+            v = np.asarray(a, dtype=float).reshape(-1)
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"reference {name}: non-finite values")
+            arrs[name] = v
+        n = len(arrs["x"])
+        if n < 2:
+            raise ValueError("reference x: need at least 2 points")
+        for name, v in arrs.items():
+            if len(v) != n:
+                raise ValueError(f"reference {name}: length {len(v)} != len(x) {n}")
+        seg = np.hypot(np.diff(arrs["x"]), np.diff(arrs["y"]))
+        if np.any(seg <= 1e-9):
+            raise ValueError("reference x, y: consecutive points must be distinct")
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        for v in arrs.values():
+            v.setflags(write=False)
+        s.setflags(write=False)
+        return cls(arrs["x"], arrs["y"], np.unwrap(arrs["yaw"]), arrs["curvature"],
+                   arrs["speed"], s, int(search_back), int(search_ahead))
+
+    @property
+    def length(self) -> float:
+        """Total arc length (m)."""
+        return float(self.s[-1])
+
+    def _project(self, px: float, py: float, lo: int, hi: int
+                 ) -> tuple[int, float, float]:
+        """Best segment in [lo, hi) → (index, t (unclipped at the path ends), signed offset)."""
+        x0, y0 = self.x[lo:hi], self.y[lo:hi]
+        dx, dy = self.x[lo + 1:hi + 1] - x0, self.y[lo + 1:hi + 1] - y0
+        L2 = dx * dx + dy * dy
+        rx, ry = px - x0, py - y0
+        t = np.clip((rx * dx + ry * dy) / L2, 0.0, 1.0)
+        ex, ey = rx - t * dx, ry - t * dy
+        k = int(np.argmin(ex * ex + ey * ey))
+        i = lo + k
+        t_raw = (rx[k] * dx[k] + ry[k] * dy[k]) / L2[k]
+        tk = float(t[k])
+        nseg = len(self.x) - 1
+        if (i == 0 and t_raw < 0.0) or (i == nseg - 1 and t_raw > 1.0):
+            tk = float(t_raw)
+        off = float((dx[k] * ry[k] - dy[k] * rx[k]) / math.sqrt(L2[k]))
+        return i, tk, off
+
+    def nearest(self, px: float, py: float, hint: int | None = None) -> NearestPoint:
+        """Projection of (px, py) on the path; ``hint`` is the previous index (window search)."""
+        nseg = len(self.x) - 1
+        if hint is None:
+            i, t, off = self._project(px, py, 0, nseg)
+        else:
+            lo = max(0, int(hint) - self.search_back)
+            hi = min(nseg, int(hint) + self.search_ahead)
+            i, t, off = self._project(px, py, lo, hi)
+            on_edge = (i == lo and lo > 0) or (i == hi - 1 and hi < nseg)
+            if on_edge:
+                i, t, off = self._project(px, py, 0, nseg)
+        seg_len = self.s[i + 1] - self.s[i]
+        s = float(self.s[i] + t * seg_len)
+        x, y, yaw, kappa, v = self.sample(np.array([s]))
+        return NearestPoint(i, s, float(x[0]), float(y[0]), float(yaw[0]), float(kappa[0]),
+                            float(v[0]), off)
+
+    def errors(self, px: float, py: float, yaw: float, hint: int | None = None) -> PathErrors:
+        """Signed lateral error (m, left +) and heading error (rad, (−π, π]) of a pose."""
+        near = self.nearest(px, py, hint)
+        return PathErrors(near.lateral_error, wrap_angle(yaw - near.yaw), near)
+
+    def sample(self, s_query: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """x, y, yaw, curvature, speed at arc lengths ``s_query`` (any shape).
+
+        Linear interpolation inside; beyond the ends the path continues straight along the end
+        heading with the end curvature set to zero and the end speed held.
+        """
+        sq = np.asarray(s_query, float)
+        s = self.s
+        x = np.interp(sq, s, self.x)
+        y = np.interp(sq, s, self.y)
+        yaw = np.interp(sq, s, self.yaw)
+        kappa = np.interp(sq, s, self.curvature)
+        v = np.interp(sq, s, self.speed)
+        over = sq > s[-1]
+        under = sq < s[0]
+        if np.any(over):
+            d = sq - s[-1]
+            x = np.where(over, self.x[-1] + d * math.cos(self.yaw[-1]), x)
+            y = np.where(over, self.y[-1] + d * math.sin(self.yaw[-1]), y)
+            kappa = np.where(over, 0.0, kappa)
+        if np.any(under):
+            d = sq - s[0]
+            x = np.where(under, self.x[0] + d * math.cos(self.yaw[0]), x)
+            y = np.where(under, self.y[0] + d * math.sin(self.yaw[0]), y)
+            kappa = np.where(under, 0.0, kappa)
+        return x, y, yaw, kappa, v
+
+    def horizon(self, near: NearestPoint, vx: float, dt_s: float, n_p: int,
+                vehicle_yaw: float, frame: str = "path") -> tuple[np.ndarray, np.ndarray]:
+        """Reference outputs (φ_ref, Y_ref), each (Np,), at s + vx T i, i = 1..Np.
+
+        ``frame`` "path" (origin at ``near``, X along its tangent) or "global" (map frame, φ_ref
+        within π of ``vehicle_yaw``). See the module docstring.
+        """
+        ds = max(vx, 0.0) * dt_s * np.arange(1, n_p + 1)
+        x, y, yaw, _, _ = self.sample(near.s + ds)
+        if frame == "path":
+            c, s = math.cos(near.yaw), math.sin(near.yaw)
+            y_ref = -s * (x - near.x) + c * (y - near.y)
+            return yaw - near.yaw, y_ref
+        if frame == "global":
+            shift = TWO_PI * round((vehicle_yaw - near.yaw) / TWO_PI)
+            return yaw + shift, y
+        raise ValueError(f"frame: '{frame}' is not one of ['path', 'global']")
+
+    def to_path_frame(self, near: NearestPoint, px: float, py: float, yaw: float
+                      ) -> tuple[float, float, float]:
+        """Pose (X, Y, φ) in the path frame at ``near`` (φ wrapped to (−π, π])."""
+        c, s = math.cos(near.yaw), math.sin(near.yaw)
+        dx, dy = px - near.x, py - near.y
+        return c * dx + s * dy, -s * dx + c * dy, wrap_angle(yaw - near.yaw)

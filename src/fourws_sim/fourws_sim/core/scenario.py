@@ -1,0 +1,252 @@
+"""Scenarios: a road, a reference path, a speed, a vehicle and an initial state, from YAML.
+
+A scenario file (``config/scenarios/<name>.yaml``; people's units, converted here)::
+
+    name: dlc_60_mu05
+    description: ...
+    speed_kmh: 60                      # reference speed (path.speed), km/h
+    road: {type: constant, mu: 0.5}    # or piecewise_x / split, see road.py
+    path: {type: tanh_dlc, stretch: auto, ...}   # see paths.py; stretch auto = v/(10 m/s)
+    end_x_m: 173                       # end when X ≥ end_x_m ...
+    duration_s: 14                     # ... or when t ≥ duration_s (at least one of the two)
+    initial: {x_m: 0, y_m: 0, yaw_deg: 0, speed_kmh: 60}   # speed defaults to speed_kmh
+    abort: {lateral_error_m: 3.0, sideslip_deg: 15}        # optional, these are the defaults
+    vehicle: {mass_kg: 800}            # optional overrides merged over vehicle.yaml
+    allow_over_mu: false
+
+Drivability (paper-notes.md): the path's peak lateral-acceleration demand max κ v² is
+computed at the scenario's speed profile and compared with μ g, μ the lowest adhesion on the
+road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
+:meth:`Scenario.summary` gives the one-line statement to print with every run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import yaml
+
+from fourws_sim.core.paths import (
+    LEAD_OUT_M,
+    ReferencePath,
+    lateral_error,
+    nearest_index,
+    path_from_mapping,
+    peak_lateral_accel_demand,
+)
+from fourws_sim.core.road import Road, road_from_mapping
+from fourws_sim.core.simulator import InitialState
+from fourws_sim.core.vehicle import VehicleParams, load_vehicle_params
+
+if TYPE_CHECKING:
+    from fourws_sim.core.simulator import PlantOutputs
+
+TOP_KEYS = {
+    "name", "description", "speed_kmh", "road", "path", "end_x_m", "duration_s", "initial",
+    "abort", "vehicle", "allow_over_mu",
+}
+INITIAL_KEYS = {"x_m", "y_m", "yaw_deg", "speed_kmh"}
+ABORT_KEYS = {"lateral_error_m", "sideslip_deg"}
+DEFAULT_ABORT_LATERAL_ERROR_M = 3.0
+DEFAULT_ABORT_SIDESLIP_DEG = 15.0
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A loaded, validated scenario (SI units)."""
+
+    name: str
+    description: str
+    speed_mps: float
+    road: Road
+    path: ReferencePath
+    vehicle: VehicleParams
+    initial: InitialState
+    end_x_m: float | None
+    duration_s: float | None
+    abort_lateral_error_m: float
+    abort_sideslip_rad: float
+    allow_over_mu: bool
+    peak_lat_accel_demand_mps2: float
+    mu_g_mps2: float
+    source: Path | None = None
+
+    @property
+    def demand_ratio(self) -> float:
+        """Peak lateral-acceleration demand over μ g."""
+        return self.peak_lat_accel_demand_mps2 / self.mu_g_mps2
+
+    def summary(self) -> str:
+        """One line: the path's peak lateral-acceleration demand against μ g."""
+        mu = self.mu_g_mps2 / self.vehicle.gravity_mps2
+        return (
+            f"path peak lateral-acceleration demand {self.peak_lat_accel_demand_mps2:.1f} m/s² "
+            f"= {self.demand_ratio:.2f} μg (μ = {mu:g})"
+        )
+
+    def check_end(self, out: PlantOutputs) -> tuple[bool, str]:
+        """(done, reason). Normal ends: end_x_m reached, duration reached, end of the path;
+        aborts (reason starts with ``"aborted:"``): |lateral error| or |sideslip| beyond the
+        abort limits. (False, "") while the run goes on."""
+        e = lateral_error(self.path, out.x, out.y)
+        if abs(e) > self.abort_lateral_error_m:
+            return True, (f"aborted: lateral error {e:+.2f} m beyond "
+                          f"±{self.abort_lateral_error_m:g} m")
+        if out.vx > 1.0 and abs(out.sideslip) > self.abort_sideslip_rad:
+            return True, (f"aborted: sideslip {math.degrees(out.sideslip):+.1f}° beyond "
+                          f"±{math.degrees(self.abort_sideslip_rad):g}°")
+        if self.end_x_m is not None and out.x >= self.end_x_m:
+            return True, f"end of scenario: X = {out.x:.1f} m ≥ end_x_m = {self.end_x_m:g} m"
+        if self.duration_s is not None and out.t_s >= self.duration_s - 1e-9:
+            return True, (f"end of scenario: t = {out.t_s:.2f} s ≥ "
+                          f"duration_s = {self.duration_s:g} s")
+        if nearest_index(self.path, out.x, out.y) >= len(self.path) - 1:
+            return True, "end of scenario: end of the reference path reached"
+        return False, ""
+
+
+def scenarios_dir(config_dir: Path | None = None) -> Path:
+    """The folder of the scenario YAML files."""
+    return _config_dir(config_dir) / "scenarios"
+
+
+def list_scenarios(config_dir: Path | None = None) -> list[str]:
+    """Names of the scenarios shipped in the config folder."""
+    return sorted(p.stem for p in scenarios_dir(config_dir).glob("*.yaml"))
+
+
+def _config_dir(config_dir: Path | None) -> Path:
+    if config_dir is not None:
+        return Path(config_dir)
+    from fourws_common.resources import config_dir as find
+
+    return find("fourws_sim")
+
+
+def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario:
+    """Load a scenario by name (``<config_dir>/scenarios/<name>.yaml``, config_dir defaulting
+    to the fourws_sim package's) or by file path. Vehicle overrides are merged over
+    ``<config_dir>/vehicle.yaml``. Raises ``ValueError`` with the reason."""
+    text = str(name_or_path)
+    as_path = Path(text)
+    if text.endswith((".yaml", ".yml")) or as_path.is_file():
+        path = as_path
+    else:
+        path = scenarios_dir(config_dir) / f"{text}.yaml"
+        if not path.is_file():
+            known = ", ".join(list_scenarios(config_dir))
+            raise ValueError(f"scenario '{text}' not found in {path.parent} (known: {known})")
+    if not path.is_file():
+        raise ValueError(f"scenario file {path} does not exist")
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{path}: expected a mapping at the top level")
+    cfg = _config_dir(config_dir)
+    vehicle_yaml = cfg / "vehicle.yaml"
+    return scenario_from_mapping(data, vehicle_yaml=vehicle_yaml, source=path)
+
+
+def _number(section: str, key: str, value: Any, lo: float | None = None,
+            hi: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{section}{key}: expected a finite number, got {value!r}")
+    v = float(value)
+    if lo is not None and v < lo:
+        raise ValueError(f"{section}{key}: {v} is below the minimum {lo}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{section}{key}: {v} is above the maximum {hi}")
+    return v
+
+
+def _sub(data: Mapping[str, Any], key: str, allowed: set[str]) -> dict[str, Any]:
+    d = data.get(key) or {}
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{key}: expected a mapping, got {d!r}")
+    unknown = set(d) - allowed
+    if unknown:
+        raise ValueError(f"{key}: unknown key(s) {sorted(unknown)}")
+    return dict(d)
+
+
+def scenario_from_mapping(
+    data: Mapping[str, Any],
+    vehicle_yaml: Path | None = None,
+    source: Path | None = None,
+) -> Scenario:
+    """Build and validate a scenario from its YAML mapping."""
+    unknown = set(data) - TOP_KEYS
+    if unknown:
+        raise ValueError(f"scenario: unknown key(s) {sorted(unknown)}")
+    for key in ("name", "speed_kmh", "road", "path"):
+        if key not in data:
+            raise ValueError(f"scenario: missing key '{key}'")
+    name = str(data["name"])
+    speed = _number("", "speed_kmh", data["speed_kmh"], 0.0, 250.0) / 3.6
+    end_x = data.get("end_x_m")
+    duration = data.get("duration_s")
+    if end_x is None and duration is None:
+        raise ValueError(f"scenario '{name}': give end_x_m and/or duration_s")
+    end_x = None if end_x is None else _number("", "end_x_m", end_x)
+    duration = None if duration is None else _number("", "duration_s", duration, 0.01, 3600.0)
+    allow = data.get("allow_over_mu", False)
+    if not isinstance(allow, bool):
+        raise ValueError(f"allow_over_mu: expected true or false, got {allow!r}")
+
+    overrides = data.get("vehicle") or {}
+    if not isinstance(overrides, Mapping):
+        raise ValueError(f"vehicle: expected a mapping of overrides, got {overrides!r}")
+    try:
+        vehicle = load_vehicle_params(vehicle_yaml, overrides)
+    except ValueError as exc:
+        raise ValueError(f"scenario '{name}': vehicle: {exc}") from None
+
+    road = road_from_mapping(data["road"])
+    path = path_from_mapping(
+        data["path"], speed, None if end_x is None else end_x + LEAD_OUT_M
+    )
+
+    ini = _sub(data, "initial", INITIAL_KEYS)
+    initial = InitialState(
+        x=_number("initial.", "x_m", ini.get("x_m", 0.0)),
+        y=_number("initial.", "y_m", ini.get("y_m", 0.0)),
+        yaw=math.radians(_number("initial.", "yaw_deg", ini.get("yaw_deg", 0.0))),
+        speed=_number("initial.", "speed_kmh", ini.get("speed_kmh", speed * 3.6), 0.0,
+                      250.0) / 3.6,
+    )
+    abort = _sub(data, "abort", ABORT_KEYS)
+    abort_e = _number("abort.", "lateral_error_m",
+                      abort.get("lateral_error_m", DEFAULT_ABORT_LATERAL_ERROR_M), 0.01)
+    abort_beta = math.radians(_number("abort.", "sideslip_deg",
+                                      abort.get("sideslip_deg", DEFAULT_ABORT_SIDESLIP_DEG),
+                                      0.1, 90.0))
+
+    demand = peak_lateral_accel_demand(path)
+    mu_g = road.mu_min() * vehicle.gravity_mps2
+    scenario = Scenario(
+        name=name,
+        description=str(data.get("description", "")),
+        speed_mps=speed,
+        road=road,
+        path=path,
+        vehicle=vehicle,
+        initial=initial,
+        end_x_m=end_x,
+        duration_s=duration,
+        abort_lateral_error_m=abort_e,
+        abort_sideslip_rad=abort_beta,
+        allow_over_mu=allow,
+        peak_lat_accel_demand_mps2=demand,
+        mu_g_mps2=mu_g,
+        source=source,
+    )
+    if demand > mu_g and not allow:
+        raise ValueError(
+            f"scenario '{name}': {scenario.summary()} exceeds μg = {mu_g:.1f} m/s²; stretch or "
+            f"slow the path, or set allow_over_mu: true if that is intended"
+        )
+    return scenario

@@ -1,0 +1,227 @@
+"""The plant: vehicle model + road + actuators, stepped with fixed-step RK4.
+
+``Simulator.step`` holds the commands (δf, δr, four wheel torques) constant for ``dt_s``
+(zero-order hold, as a 100 Hz controller does) and integrates the 22-state model of
+``vehicle.py`` with classical RK4 at ``substep_s`` (default 1 ms; ``dt_s`` must be an integer
+multiple). Commands outside the actuator limits are clipped (``last_clipped`` names the
+channels, for the node to warn); non-finite commands raise ``ValueError``. The road μ under
+each wheel is sampled at the start of each substep.
+
+Everything is plain Python floats in a fixed order of operations, so two runs with the same
+inputs give bit-identical outputs. Time is the integer count of substeps times the substep,
+rounded to 1e-12 s, so the 10 ms grid has no accumulated drift.
+
+Initial state: the scenario's position, heading and speed, v_y = r = 0, wheels rolling
+freely (ω = v/R), actuators at rest (zero torque, zero steer), no load transfer.
+
+``PlantOutputs`` holds every field of the VehicleState message (SI units): accelerations are
+accelerometer-style body-frame CG accelerations a_x = v̇x − v_y r, a_y = v̇y + v_x r; the
+per-wheel ``fx``/``fy`` are tyre forces in each wheel's own frame; ``yaw`` is continuous
+(not wrapped), like the paths' heading.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fourws_sim.core.actuators import check_finite_commands, clip_commands
+from fourws_sim.core.road import Road
+from fourws_sim.core.vehicle import N_STATE, State, TwoTrackModel, VehicleParams
+
+if TYPE_CHECKING:
+    from fourws_sim.core.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial pose and motion, SI: m, rad, m/s, rad/s."""
+
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+    speed: float = 0.0
+    vy: float = 0.0
+    yaw_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "yaw", "speed", "vy", "yaw_rate"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"initial.{name}: must be finite")
+
+
+@dataclass
+class PlantOutputs:
+    """Every field of the VehicleState message, SI; wheel arrays (4,) FL FR RL RR."""
+
+    t_s: float
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    vy: float
+    yaw_rate: float
+    ax: float
+    ay: float
+    sideslip: float
+    steer_front: float
+    steer_rear: float
+    wheel_speed: np.ndarray
+    wheel_torque: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    fz: np.ndarray
+    mu: np.ndarray
+
+
+class Simulator:
+    """Fixed-step RK4 plant. See the module docstring."""
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        road: Road,
+        initial: InitialState,
+        substep_s: float = 0.001,
+    ) -> None:
+        if not (math.isfinite(substep_s) and 1e-5 <= substep_s <= 0.05):
+            raise ValueError(f"substep_s: {substep_s} is outside [1e-05, 0.05] s")
+        self.vehicle = vehicle
+        self.road = road
+        self.initial = initial
+        self.substep_s = float(substep_s)
+        self._model = TwoTrackModel(vehicle)
+        self._limits = vehicle.actuator_limits()
+        self._xw, self._yw = vehicle.wheel_positions_m()
+        self._n_sub = 0
+        y = [0.0] * N_STATE
+        y[State.VX] = initial.speed
+        y[State.VY] = initial.vy
+        y[State.R] = initial.yaw_rate
+        y[State.X] = initial.x
+        y[State.Y] = initial.y
+        y[State.YAW] = initial.yaw
+        omega = initial.speed / vehicle.wheel_radius_m
+        for i in range(4):
+            y[State.OMEGA_FL + i] = omega
+        self._y = y
+        self._u: tuple[float, ...] = (0.0,) * 6
+        self.last_clipped: tuple[str, ...] = ()
+        """Names of the command channels clipped in the last :meth:`step`."""
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, substep_s: float = 0.001) -> Simulator:
+        """A simulator at the scenario's initial state, vehicle and road."""
+        return cls(scenario.vehicle, scenario.road, scenario.initial, substep_s)
+
+    @property
+    def t_s(self) -> float:
+        """Simulated time, s."""
+        return round(self._n_sub * self.substep_s, 12)
+
+    def state(self) -> np.ndarray:
+        """Copy of the state vector, indexed by :class:`~fourws_sim.core.vehicle.State`."""
+        return np.array(self._y)
+
+    def _mu(self, y: list[float]) -> tuple[float, float, float, float]:
+        road = self.road
+        if road.uniform:
+            return road.mu4((), ())
+        px, py, yaw = y[State.X], y[State.Y], y[State.YAW]
+        c, s = math.cos(yaw), math.sin(yaw)
+        (x0, x1, x2, x3), (y0, y1, y2, y3) = self._xw, self._yw
+        return road.mu4(
+            (px + x0 * c - y0 * s, px + x1 * c - y1 * s, px + x2 * c - y2 * s,
+             px + x3 * c - y3 * s),
+            (py + x0 * s + y0 * c, py + x1 * s + y1 * c, py + x2 * s + y2 * c,
+             py + x3 * s + y3 * c),
+        )
+
+    def outputs(self) -> PlantOutputs:
+        """The plant outputs at the current time."""
+        y = self._y
+        mu = self._mu(y)
+        info: dict[str, Any] = {}
+        self._model.derivatives(y, self._u, mu, info)
+        vx, vy = y[State.VX], y[State.VY]
+        return PlantOutputs(
+            t_s=self.t_s,
+            x=y[State.X],
+            y=y[State.Y],
+            yaw=y[State.YAW],
+            vx=vx,
+            vy=vy,
+            yaw_rate=y[State.R],
+            ax=info["ax"],
+            ay=info["ay"],
+            sideslip=math.atan2(vy, vx),
+            steer_front=y[State.STEER_FRONT],
+            steer_rear=y[State.STEER_REAR],
+            wheel_speed=np.array(y[State.OMEGA_FL:State.OMEGA_RR + 1]),
+            wheel_torque=np.array(y[State.TORQUE_FL:State.TORQUE_RR + 1]),
+            fx=np.array(info["fx"]),
+            fy=np.array(info["fy"]),
+            fz=np.array(info["fz"]),
+            mu=np.array(mu, dtype=float),
+        )
+
+    def step(
+        self,
+        steer_front_cmd: float,
+        steer_rear_cmd: float,
+        wheel_torque_cmd: np.ndarray,
+        dt_s: float = 0.01,
+    ) -> PlantOutputs:
+        """Hold the commands for ``dt_s``, integrate with fixed-step RK4 at ``substep_s``
+        (``dt_s`` must be an integer multiple), return the outputs at t + dt.
+
+        Steer commands in rad (road-wheel angles), wheel torques (4,) in N·m FL FR RL RR.
+        """
+        self.advance(steer_front_cmd, steer_rear_cmd, wheel_torque_cmd, dt_s)
+        return self.outputs()
+
+    def advance(
+        self,
+        steer_front_cmd: float,
+        steer_rear_cmd: float,
+        wheel_torque_cmd: np.ndarray,
+        dt_s: float = 0.01,
+    ) -> None:
+        """:meth:`step` without building the outputs."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise ValueError(f"dt_s: must be a positive finite number, got {dt_s!r}")
+        h = self.substep_s
+        n = round(dt_s / h)
+        if n < 1 or abs(n * h - dt_s) > 1e-9 * max(dt_s, 1e-3):
+            raise ValueError(f"dt_s: {dt_s} s is not an integer multiple of substep_s = {h} s")
+        sf, sr, torques = check_finite_commands(steer_front_cmd, steer_rear_cmd, wheel_torque_cmd)
+        u, self.last_clipped = clip_commands(sf, sr, torques, self._limits)
+        self._u = u
+        f = self._model.derivatives
+        hh, h6 = 0.5 * h, h / 6.0
+        y = self._y
+        uniform = self.road.uniform
+        mu = self.road.mu4((), ()) if uniform else None
+        for _ in range(n):
+            if not uniform:
+                mu = self._mu(y)
+            k1 = f(y, u, mu)
+            k2 = f([a + hh * b for a, b in zip(y, k1, strict=True)], u, mu)
+            k3 = f([a + hh * b for a, b in zip(y, k2, strict=True)], u, mu)
+            k4 = f([a + h * b for a, b in zip(y, k3, strict=True)], u, mu)
+            y = [
+                a + h6 * (b1 + 2.0 * (b2 + b3) + b4)
+                for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True)
+            ]
+        self._y = y
+        self._n_sub += n
+
+    def check_end(
+        self, scenario: Scenario, outputs: PlantOutputs | None = None
+    ) -> tuple[bool, str]:
+        """(done, reason) for the scenario at the current outputs; see
+        :meth:`Scenario.check_end`."""
+        return scenario.check_end(outputs if outputs is not None else self.outputs())

@@ -1,0 +1,466 @@
+"""Nonlinear two-track (four-wheel) vehicle model with wheel spin, motors and steering.
+
+Frames and signs follow docs/conventions.md (ISO 8855: x forward, y left, z up; yaw, yaw rate,
+yaw moment and steer angles positive to the left). Wheel order FL, FR, RL, RR.
+
+States (:class:`State`): body velocities v_x, v_y and yaw rate r; position X, Y and yaw ψ
+(continuous, not wrapped); the four wheel spin rates ω_i; per motor the actual torque T_i
+and its rate Ṫ_i (eq. 32); the actual road-wheel angles δ_f, δ_r; the two filtered CG
+accelerations used for load transfer.
+
+Wheel i sits at (x_i, y_i) = (a, +B_f/2), (a, −B_f/2), (−b, +B_r/2), (−b, −B_r/2). Front
+wheels steer by δ_f, rear wheels by δ_r (parallel steer, no Ackermann). Contact-point velocity
+in the body frame v_i = (v_x − r y_i, v_y + r x_i), rotated into the wheel frame by δ_i;
+slips and tyre forces (F_x,i, F_y,i) in the wheel frame from ``tyre.py``; back to the body::
+
+    F_X,i = F_x,i cos δ_i − F_y,i sin δ_i,      F_Y,i = F_x,i sin δ_i + F_y,i cos δ_i
+
+Body dynamics (m includes the wheels; a_x, a_y are the accelerometer-style CG accelerations)::
+
+    m a_x = Σ F_X,i − ½ ρ c_d A v_x|v_x| − f_r m g tanh(v_x / v_rr)
+    m a_y = Σ F_Y,i
+    v̇_x = a_x + v_y r,   v̇_y = a_y − v_x r
+    I_z ṙ = Σ (x_i F_Y,i − y_i F_X,i)
+    Ẋ = v_x cos ψ − v_y sin ψ,   Ẏ = v_x sin ψ + v_y cos ψ,   ψ̇ = r
+    I_w ω̇_i = T_i − R F_x,i
+
+Rolling resistance is applied to the body (it is small, 88 N here, and keeps the reported
+tyre forces F_x,i the pure tyre forces); its tanh makes it vanish smoothly at standstill.
+
+Vertical loads: quasi-static longitudinal and lateral load transfer from the CG height h,
+the lateral part split between the axles by the front share ε of the roll stiffness (roll
+centres at ground level, i.e. all lateral transfer goes through the springs)::
+
+    F_z,front axle = m g b/L − m h â_x / L,     F_z,rear axle = m g a/L + m h â_x / L
+    ΔF_z,f = ε m h â_y / B_f,                   ΔF_z,r = (1 − ε) m h â_y / B_r
+    F_z,FL = F_z,front/2 − ΔF_z,f,  F_z,FR = F_z,front/2 + ΔF_z,f   (likewise rear)
+
+with â_x, â_y the CG accelerations passed through a first-order lag of time constant
+``load_transfer_time_constant_s`` (two states). This avoids the algebraic loop between the
+loads and the accelerations they produce, and stands for the roll and pitch response of the
+sprung mass (a ≈ 1.6 Hz, ζ ≈ 0.4 roll mode lags by about 2ζ/ω_n ≈ 0.08 s); in steady state
+it equals the quasi-static transfer. Loads are clipped at 0 (wheel lift).
+
+Numerics: the wheel-spin mode has the eigenvalue λ ≈ −R² K_κ / (I_w max(|v_x|, v_min))
+(K_κ = c_κ F_z). Fixed-step RK4 at h = 1 ms is stable for |λ| h < 2.78, which with the
+default parameters holds for loads up to ≈ 2 × static at any speed because the slip
+denominator is floored at ``slip_speed_min_mps`` = 2.5 m/s.
+
+The derivative function :meth:`TwoTrackModel.derivatives` is written in plain Python floats
+(tuple unpacking in :class:`State` order, no numpy): on 4-element arrays numpy's call overhead
+is larger than the arithmetic, and this function runs 40 times per 10 ms control step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import IntEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fourws_common.params import from_mapping, param
+from fourws_sim.core.actuators import ActuatorLimits
+from fourws_sim.core.tyre import TyreCoefficients, cornering_stiffness
+
+
+class Wheel(IntEnum):
+    """Wheel indices, the order of every per-wheel array."""
+
+    FL = 0
+    FR = 1
+    RL = 2
+    RR = 3
+
+
+class State(IntEnum):
+    """Indices of the plant state vector."""
+
+    VX = 0
+    VY = 1
+    R = 2
+    X = 3
+    Y = 4
+    YAW = 5
+    OMEGA_FL = 6
+    OMEGA_FR = 7
+    OMEGA_RL = 8
+    OMEGA_RR = 9
+    TORQUE_FL = 10
+    TORQUE_FR = 11
+    TORQUE_RL = 12
+    TORQUE_RR = 13
+    TORQUE_RATE_FL = 14
+    TORQUE_RATE_FR = 15
+    TORQUE_RATE_RL = 16
+    TORQUE_RATE_RR = 17
+    STEER_FRONT = 18
+    STEER_REAR = 19
+    AX_FILTERED = 20
+    AY_FILTERED = 21
+
+
+N_STATE = len(State)
+OMEGA = slice(State.OMEGA_FL, State.OMEGA_RR + 1)
+TORQUE = slice(State.TORQUE_FL, State.TORQUE_RR + 1)
+WHEEL_SIDE = (1.0, -1.0, 1.0, -1.0)
+"""+1 for the left wheels, −1 for the right wheels (FL, FR, RL, RR)."""
+
+RECORDED_KEYS = (
+    "cornering_stiffness_front_static_n_per_rad",
+    "cornering_stiffness_rear_static_n_per_rad",
+)
+"""Keys of vehicle.yaml that record derived values (not inputs); checked on load."""
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Vehicle, tyre and actuator parameters (SI, except the *_deg fields people edit)."""
+
+    mass_kg: float = param(750.0, "total vehicle mass (Table 5)", lo=100.0, hi=5000.0, unit="kg")
+    yaw_inertia_kg_m2: float = param(
+        750.0, "yaw moment of inertia about the CG (Table 5)", lo=10.0, hi=20000.0, unit="kg*m^2"
+    )
+    wheelbase_m: float = param(2.35, "wheelbase L (Table 5)", lo=0.5, hi=6.0, unit="m")
+    cg_to_front_axle_m: float = param(1.10, "CG to front axle a (Table 5)", lo=0.1, hi=5.0,
+                                      unit="m")
+    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b (Table 5)", lo=0.1, hi=5.0, unit="m")
+    cg_height_m: float = param(0.54, "CG height h (Table 5)", lo=0.0, hi=2.0, unit="m")
+    track_width_front_m: float = param(1.30, "front track width B_f", lo=0.5, hi=3.0, unit="m")
+    track_width_rear_m: float = param(1.30, "rear track width B_r", lo=0.5, hi=3.0, unit="m")
+    wheel_radius_m: float = param(0.27, "effective rolling radius (Table 5)", lo=0.1, hi=1.0,
+                                  unit="m")
+    wheel_inertia_kg_m2: float = param(
+        0.8, "spin inertia of wheel, tyre and motor rotor", lo=0.05, hi=20.0, unit="kg*m^2"
+    )
+    roll_stiffness_front_share: float = param(
+        0.55, "front share of the total roll stiffness", lo=0.0, hi=1.0, unit="1"
+    )
+    load_transfer_time_constant_s: float = param(
+        0.08, "lag of the accelerations that drive load transfer", lo=0.005, hi=1.0, unit="s"
+    )
+    gravity_mps2: float = param(9.81, "gravitational acceleration", lo=9.7, hi=9.9, unit="m/s^2")
+    air_density_kg_m3: float = param(1.2, "air density", lo=0.0, hi=2.0, unit="kg/m^3")
+    drag_coefficient: float = param(0.32, "aerodynamic drag coefficient c_d", lo=0.0, hi=2.0,
+                                    unit="1")
+    frontal_area_m2: float = param(1.9, "frontal area A", lo=0.0, hi=10.0, unit="m^2")
+    rolling_resistance_coeff: float = param(
+        0.012, "rolling resistance coefficient f_r", lo=0.0, hi=0.1, unit="1"
+    )
+    rolling_resistance_speed_mps: float = param(
+        0.5, "speed scale of the tanh that fades rolling resistance at standstill",
+        lo=0.01, hi=5.0, unit="m/s",
+    )
+    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0", lo=100.0, hi=20000.0,
+                                       unit="N")
+    tyre_cornering_coeff_front: float = param(
+        17.73, "p_Ky1 of the front tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
+    )
+    tyre_cornering_coeff_rear: float = param(
+        20.65, "p_Ky1 of the rear tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
+    )
+    tyre_cornering_load_factor: float = param(
+        2.0, "p_Ky2: K_alpha peaks at F_z = p_Ky2 F_z0", lo=0.2, hi=10.0, unit="1"
+    )
+    tyre_long_stiffness_per_load: float = param(
+        17.0, "longitudinal slip stiffness over load c_kappa = K_kappa/F_z", lo=1.0, hi=60.0,
+        unit="1",
+    )
+    tyre_friction_load_sensitivity: float = param(
+        0.0, "p_D2: peak friction falls by this fraction per F_z0 of load above F_z0",
+        lo=-0.5, hi=0.0, unit="1",
+    )
+    tyre_shape_lateral: float = param(1.3, "Magic Formula C_y", lo=1.01, hi=1.99, unit="1")
+    tyre_curvature_lateral: float = param(-1.0, "Magic Formula E_y", lo=-10.0, hi=0.99, unit="1")
+    tyre_shape_longitudinal: float = param(1.65, "Magic Formula C_x", lo=1.01, hi=1.99, unit="1")
+    tyre_curvature_longitudinal: float = param(0.0, "Magic Formula E_x", lo=-10.0, hi=0.99,
+                                               unit="1")
+    slip_speed_min_mps: float = param(
+        2.5, "floor of the slip denominators max(|v_x|, v_min)", lo=0.1, hi=10.0, unit="m/s"
+    )
+    motor_time_constant_s: float = param(
+        0.02, "in-wheel motor tau of eq. (32) (Table 5)", lo=0.001, hi=1.0, unit="s"
+    )
+    motor_torque_max_nm: float = param(500.0, "in-wheel motor torque limit (each, +/-)",
+                                       lo=1.0, hi=5000.0, unit="N*m")
+    steer_front_time_constant_s: float = param(
+        0.05, "front steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
+    )
+    steer_rear_time_constant_s: float = param(
+        0.05, "rear steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
+    )
+    max_steer_front_deg: float = param(30.0, "front road-wheel angle limit (eq. 20)", lo=1.0,
+                                       hi=60.0, unit="deg")
+    max_steer_rear_deg: float = param(10.0, "rear road-wheel angle limit (eq. 20)", lo=0.0,
+                                      hi=60.0, unit="deg")
+    max_steer_rate_front_deg_s: float = param(
+        40.0, "front road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
+    )
+    max_steer_rate_rear_deg_s: float = param(
+        30.0, "rear road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
+    )
+
+    def __post_init__(self) -> None:
+        total = self.cg_to_front_axle_m + self.cg_to_rear_axle_m
+        if abs(total - self.wheelbase_m) > 1e-3:
+            raise ValueError(
+                f"cg_to_front_axle_m + cg_to_rear_axle_m = {total:.4f} m must equal "
+                f"wheelbase_m = {self.wheelbase_m:.4f} m"
+            )
+
+    # --- derived quantities -------------------------------------------------------------
+
+    @property
+    def static_wheel_loads_n(self) -> np.ndarray:
+        """Static vertical loads (4,), N, FL FR RL RR."""
+        w = self.mass_kg * self.gravity_mps2
+        front = 0.5 * w * self.cg_to_rear_axle_m / self.wheelbase_m
+        rear = 0.5 * w * self.cg_to_front_axle_m / self.wheelbase_m
+        return np.array([front, front, rear, rear])
+
+    def tyre(self, axle: str = "front") -> TyreCoefficients:
+        """Tyre coefficients of the ``"front"`` or ``"rear"`` tyres, or of all four wheels
+        (``"all"``: p_Ky1 as an array FL FR RL RR)."""
+        f, r = self.tyre_cornering_coeff_front, self.tyre_cornering_coeff_rear
+        coeff: float | np.ndarray = {"front": f, "rear": r, "all": np.array([f, f, r, r])}[axle]
+        return TyreCoefficients(
+            nominal_load_n=self.tyre_nominal_load_n,
+            cornering_coeff=coeff,
+            cornering_load_factor=self.tyre_cornering_load_factor,
+            long_stiffness_per_load=self.tyre_long_stiffness_per_load,
+            friction_load_sensitivity=self.tyre_friction_load_sensitivity,
+            shape_lat=self.tyre_shape_lateral,
+            curvature_lat=self.tyre_curvature_lateral,
+            shape_long=self.tyre_shape_longitudinal,
+            curvature_long=self.tyre_curvature_longitudinal,
+        )
+
+    def static_cornering_stiffness(self) -> tuple[float, float]:
+        """Per-tyre cornering stiffness (front, rear) at static load, N/rad: the C_cf, C_cr
+        of the linear single-track model."""
+        loads = self.static_wheel_loads_n
+        return (
+            float(cornering_stiffness(loads[Wheel.FL], self.tyre("front"))),
+            float(cornering_stiffness(loads[Wheel.RL], self.tyre("rear"))),
+        )
+
+    def understeer_gradient(self) -> float:
+        """K_us = m/L (b/(2C_f) − a/(2C_r)) of the linear single-track model, rad/(m/s²)."""
+        cf, cr = self.static_cornering_stiffness()
+        return (self.mass_kg / self.wheelbase_m) * (
+            self.cg_to_rear_axle_m / (2.0 * cf) - self.cg_to_front_axle_m / (2.0 * cr)
+        )
+
+    def actuator_limits(self) -> ActuatorLimits:
+        """Actuator limits in SI units."""
+        return ActuatorLimits(
+            max_steer_front_rad=math.radians(self.max_steer_front_deg),
+            max_steer_rear_rad=math.radians(self.max_steer_rear_deg),
+            max_steer_rate_front_rad_s=math.radians(self.max_steer_rate_front_deg_s),
+            max_steer_rate_rear_rad_s=math.radians(self.max_steer_rate_rear_deg_s),
+            max_motor_torque_nm=self.motor_torque_max_nm,
+        )
+
+    def wheel_positions_m(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """((x_i), (y_i)) of the wheel centres in the body frame, m, FL FR RL RR."""
+        a, b = self.cg_to_front_axle_m, self.cg_to_rear_axle_m
+        hf, hr = 0.5 * self.track_width_front_m, 0.5 * self.track_width_rear_m
+        return (a, a, -b, -b), (hf, -hf, hr, -hr)
+
+
+def default_vehicle_yaml() -> Path:
+    """Path of the package's vehicle.yaml (source tree or installed share)."""
+    from fourws_common.resources import config_dir
+
+    return config_dir("fourws_sim") / "vehicle.yaml"
+
+
+def read_vehicle_yaml(path: Path | str | None = None) -> dict[str, Any]:
+    """Flat mapping of vehicle.yaml, plain or in ROS params-file form
+    (``node: {ros__parameters: {...}}``); the recorded keys included."""
+    path = Path(path) if path is not None else default_vehicle_yaml()
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping at the top level")
+    sections = [v for v in data.values() if isinstance(v, dict) and "ros__parameters" in v]
+    if sections:
+        flat: dict[str, Any] = {}
+        for s in sections:
+            flat.update(s["ros__parameters"] or {})
+        return flat
+    return dict(data)
+
+
+def load_vehicle_params(
+    path: Path | str | None = None, overrides: Mapping[str, Any] | None = None
+) -> VehicleParams:
+    """VehicleParams from vehicle.yaml (default: the package's) with ``overrides`` merged over.
+
+    The recorded keys (:data:`RECORDED_KEYS`) are checked against the file's own tyre
+    coefficients (within 0.5 %) and then dropped; with overrides the recorded values describe
+    the base file only. Raises ``ValueError`` naming the offending key.
+    """
+    values = read_vehicle_yaml(path)
+    recorded = {k: values.pop(k) for k in RECORDED_KEYS if k in values}
+    base = from_mapping(VehicleParams, values)
+    if recorded:
+        actual = dict(zip(RECORDED_KEYS, base.static_cornering_stiffness(), strict=True))
+        for key, value in recorded.items():
+            if abs(float(value) - actual[key]) > 0.005 * actual[key]:
+                raise ValueError(
+                    f"{key}: vehicle.yaml records {value} but its tyre coefficients give "
+                    f"{actual[key]:.0f} N/rad; update the recorded value"
+                )
+    if overrides:
+        values.update(overrides)
+        return from_mapping(VehicleParams, values)
+    return base
+
+
+class TwoTrackModel:
+    """The plant's right-hand side ẏ = f(y, u, μ) in plain floats.
+
+    ``y`` is a sequence in :class:`State` order; ``u`` = (δf_cmd, δr_cmd, T_FL, T_FR, T_RL,
+    T_RR) already clipped to the actuator limits; ``mu`` the road μ under each wheel.
+    """
+
+    def __init__(self, p: VehicleParams) -> None:
+        self.params = p
+        m, h, length = p.mass_kg, p.cg_height_m, p.wheelbase_m
+        w = m * p.gravity_mps2
+        front, rear = p.tyre("front"), p.tyre("rear")
+        lim = p.actuator_limits()
+        tau_m = p.motor_time_constant_s
+        self._c = (
+            m, 1.0 / m, 1.0 / p.yaw_inertia_kg_m2,
+            p.cg_to_front_axle_m, p.cg_to_rear_axle_m,
+            0.5 * p.track_width_front_m, 0.5 * p.track_width_rear_m,
+            p.wheel_radius_m, 1.0 / p.wheel_inertia_kg_m2,
+            0.5 * w * p.cg_to_rear_axle_m / length,
+            0.5 * w * p.cg_to_front_axle_m / length,
+            0.5 * m * h / length,
+            p.roll_stiffness_front_share * m * h / p.track_width_front_m,
+            (1.0 - p.roll_stiffness_front_share) * m * h / p.track_width_rear_m,
+            0.5 * p.air_density_kg_m3 * p.drag_coefficient * p.frontal_area_m2,
+            p.rolling_resistance_coeff * w, 1.0 / p.rolling_resistance_speed_mps,
+            p.slip_speed_min_mps,
+            2.0 * tau_m, 1.0 / (2.0 * tau_m * tau_m),
+            1.0 / p.steer_front_time_constant_s, lim.max_steer_rate_front_rad_s,
+            1.0 / p.steer_rear_time_constant_s, lim.max_steer_rate_rear_rad_s,
+            1.0 / p.load_transfer_time_constant_s,
+        )
+        self._kf = front.scalar_constants(front.cornering_coeff)
+        self._kr = rear.scalar_constants(rear.cornering_coeff)
+
+    def derivatives(
+        self,
+        y: list[float] | tuple[float, ...],
+        u: tuple[float, ...],
+        mu: tuple[float, float, float, float],
+        info: dict[str, Any] | None = None,
+    ) -> list[float]:
+        """ẏ (list in :class:`State` order). With ``info`` given, also stores the wheel-frame
+        tyre forces ``fx``, ``fy``, loads ``fz`` (tuples of 4) and the CG accelerations
+        ``ax``, ``ay`` (accelerometer-style, body frame) in it."""
+        (m, inv_m, inv_iz, a, b, hf, hr, rad, inv_iw, fz_f0, fz_r0, k_long, k_lat_f, k_lat_r,
+         k_aero, f_rr, inv_v_rr, v_min, two_tau, inv_two_tau2, inv_tau_f, rate_f, inv_tau_r,
+         rate_r, inv_tau_lt) = self._c
+        (vx, vy, r, _x, _y, yaw, w0, w1, w2, w3, t0, t1, t2, t3, dt0, dt1, dt2, dt3,
+         df, dr, axf, ayf) = y
+        df_cmd, dr_cmd, tc0, tc1, tc2, tc3 = u
+        mu0, mu1, mu2, mu3 = mu
+        forces = _tyre_forces
+        kf, kr = self._kf, self._kr
+
+        dlong = k_long * axf
+        fzf, fzr = fz_f0 - dlong, fz_r0 + dlong
+        dlf, dlr = k_lat_f * ayf, k_lat_r * ayf
+        fz0 = max(fzf - dlf, 0.0)
+        fz1 = max(fzf + dlf, 0.0)
+        fz2 = max(fzr - dlr, 0.0)
+        fz3 = max(fzr + dlr, 0.0)
+
+        cf, sf = math.cos(df), math.sin(df)
+        cr, sr = math.cos(dr), math.sin(dr)
+        vyf, vyr = vy + a * r, vy - b * r
+        vxl, vxr = vx - hf * r, vx + hf * r
+        fx0, fy0 = forces(vxl * cf + vyf * sf, vyf * cf - vxl * sf, w0 * rad, fz0, mu0, v_min, kf)
+        fx1, fy1 = forces(vxr * cf + vyf * sf, vyf * cf - vxr * sf, w1 * rad, fz1, mu1, v_min, kf)
+        vxl, vxr = vx - hr * r, vx + hr * r
+        fx2, fy2 = forces(vxl * cr + vyr * sr, vyr * cr - vxl * sr, w2 * rad, fz2, mu2, v_min, kr)
+        fx3, fy3 = forces(vxr * cr + vyr * sr, vyr * cr - vxr * sr, w3 * rad, fz3, mu3, v_min, kr)
+
+        fxb_f0, fxb_f1 = fx0 * cf - fy0 * sf, fx1 * cf - fy1 * sf
+        fyb_f = (fx0 + fx1) * sf + (fy0 + fy1) * cf
+        fxb_r2, fxb_r3 = fx2 * cr - fy2 * sr, fx3 * cr - fy3 * sr
+        fyb_r = (fx2 + fx3) * sr + (fy2 + fy3) * cr
+
+        ax = (fxb_f0 + fxb_f1 + fxb_r2 + fxb_r3 - k_aero * vx * abs(vx)
+              - f_rr * math.tanh(vx * inv_v_rr)) * inv_m
+        ay = (fyb_f + fyb_r) * inv_m
+        mz = a * fyb_f - b * fyb_r + hf * (fxb_f1 - fxb_f0) + hr * (fxb_r3 - fxb_r2)
+        cy, sy = math.cos(yaw), math.sin(yaw)
+
+        rate = (df_cmd - df) * inv_tau_f
+        ddf = rate_f if rate > rate_f else (-rate_f if rate < -rate_f else rate)
+        rate = (dr_cmd - dr) * inv_tau_r
+        ddr = rate_r if rate > rate_r else (-rate_r if rate < -rate_r else rate)
+
+        if info is not None:
+            info["fx"] = (fx0, fx1, fx2, fx3)
+            info["fy"] = (fy0, fy1, fy2, fy3)
+            info["fz"] = (fz0, fz1, fz2, fz3)
+            info["ax"] = ax
+            info["ay"] = ay
+        return [
+            ax + vy * r,
+            ay - vx * r,
+            mz * inv_iz,
+            vx * cy - vy * sy,
+            vx * sy + vy * cy,
+            r,
+            (t0 - rad * fx0) * inv_iw,
+            (t1 - rad * fx1) * inv_iw,
+            (t2 - rad * fx2) * inv_iw,
+            (t3 - rad * fx3) * inv_iw,
+            dt0, dt1, dt2, dt3,
+            (tc0 - t0 - two_tau * dt0) * inv_two_tau2,
+            (tc1 - t1 - two_tau * dt1) * inv_two_tau2,
+            (tc2 - t2 - two_tau * dt2) * inv_two_tau2,
+            (tc3 - t3 - two_tau * dt3) * inv_two_tau2,
+            ddf,
+            ddr,
+            (ax - axf) * inv_tau_lt,
+            (ay - ayf) * inv_tau_lt,
+        ]
+
+
+def _tyre_forces(
+    vxw: float, vyw: float, omega_r: float, fz: float, mu: float, v_min: float,
+    k: tuple[float, ...],
+) -> tuple[float, float]:
+    """Slips (tyre.py definitions) and combined-slip forces of one wheel, plain floats;
+    inlined copy of :func:`fourws_sim.core.tyre.forces_scalar` (tested equal)."""
+    ky1_fz0, inv_ky2_fz0, p_d2, inv_fz0, c_kx, cy, ey, uy, cx, ex, ux = k
+    lam = 1.0 + p_d2 * (fz * inv_fz0 - 1.0)
+    lam = 1.0 if lam > 1.0 else (0.1 if lam < 0.1 else lam)
+    d = mu * fz * lam
+    if d <= 0.0:
+        return 0.0, 0.0
+    den = vxw if vxw > v_min else (-vxw if -vxw > v_min else v_min)
+    k_a = ky1_fz0 * math.sin(2.0 * math.atan(fz * inv_ky2_fz0))
+    sx = (omega_r - vxw) / den * c_kx * fz / (ux * cx * d)
+    sy = -math.atan(vyw / den) * k_a / (uy * cy * d)
+    rho = math.sqrt(sx * sx + sy * sy)
+    if rho < 1e-12:
+        return d * sx * cx * ux, d * sy * cy * uy
+    u = rho * ux
+    gx = math.sin(cx * math.atan(u - ex * (u - math.atan(u)))) / rho
+    u = rho * uy
+    gy = math.sin(cy * math.atan(u - ey * (u - math.atan(u)))) / rho
+    return d * sx * gx, d * sy * gy

@@ -1,0 +1,181 @@
+"""recorder_node over real topics: stopped cleanly (SIGINT, SIGTERM) and killed (SIGKILL).
+
+The test's own node publishes the graph's messages at 100 Hz; the bag is then read back by
+``rosbags`` (independent reader) and by ``fourws_bringup.bag``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+
+from fourws_bringup.bag import BagError, read_run, recover
+from fourws_bringup.supervisor import NodeSpec
+from fourws_common.conversions import ns_to_stamp
+from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
+
+pytestmark = pytest.mark.integration
+
+DT_NS = 10_000_000
+
+
+def recorder(out: Path, **params) -> NodeSpec:
+    return NodeSpec(name="recorder_node", package="fourws_bringup", executable="recorder_node",
+                    parameters={"output_dir": str(out), **params})
+
+
+def state(k: int) -> VehicleState:
+    m = VehicleState()
+    m.header.stamp = ns_to_stamp(k * DT_NS)
+    m.header.frame_id = "map"
+    m.x, m.y, m.yaw, m.vx = 0.167 * k, 0.001 * k, 1e-4 * k, 16.7
+    m.wheel_speed = [61.0 + k, 62.0, 63.0, 64.0]
+    m.fz = [1800.0, 1801.0, 1802.0, 1803.0 + k]
+    return m
+
+
+class Publisher:
+    """The graph's publishers in the test node; ``steps(n)`` publishes n steps at 100 Hz."""
+
+    def __init__(self, ros) -> None:
+        n = ros.node
+        self.ros = ros
+        self.state = n.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+        self.cmd = n.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+        self.clock = n.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self.ref = n.create_publisher(ReferenceTrajectory, "/reference/trajectory", LATCHED_QOS)
+        self.status = n.create_publisher(String, "/run/status", LATCHED_QOS)
+        self.ref_msg = ReferenceTrajectory()
+        self.ref_msg.header.frame_id = "map"
+        self.ref_msg.x = np.linspace(0, 100, 101).tolist()
+        self.ref_msg.y = [0.0] * 101
+        self.ref_msg.yaw = self.ref_msg.curvature = [0.0] * 101
+        self.ref_msg.speed = [16.7] * 101
+        self.ref.publish(self.ref_msg)  # latched before the recorder exists: must still arrive
+        self.status.publish(String(data=json.dumps({"state": "running", "scenario": "t"})))
+
+    def wait_matched(self) -> None:
+        pubs = (self.state, self.cmd, self.clock, self.ref, self.status)
+        assert self.ros.spin_until(lambda: all(p.get_subscription_count() >= 1 for p in pubs),
+                                   30.0), "the recorder never subscribed"
+
+    def steps(self, n: int) -> None:
+        t0 = time.monotonic()
+        for k in range(n):
+            self.clock.publish(Clock(clock=ns_to_stamp(k * DT_NS)))
+            s = state(k)
+            self.state.publish(s)
+            self.cmd.publish(MpcCommand(header=s.header, delta_front=1e-3 * k,
+                                        yaw_moment=5.0 * k))
+            delay = t0 + (k + 1) * 0.01 - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        self.status.publish(String(data=json.dumps({"state": "ended", "completed": True,
+                                                    "scenario": "t", "steps": n})))
+
+
+def check_complete_bag(folder: Path, n: int) -> None:
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import Reader
+
+    with Reader(folder) as r:
+        counts = {c.topic: c.msgcount for c in r.connections}
+    assert counts["/vehicle/state"] == n and counts["/control/mpc_command"] == n
+    assert counts["/clock"] == n and counts["/reference/trajectory"] == 1
+    assert counts["/run/status"] == 2
+    got: dict[str, list] = {}
+    with AnyReader([folder]) as r:
+        for c, _t, raw in r.messages():
+            got.setdefault(c.topic, []).append(r.deserialize(raw, c.msgtype))
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in got["/vehicle/state"]]
+    assert stamps == [k * DT_NS for k in range(n)], "every state, in order"
+    for k, m in enumerate(got["/vehicle/state"]):
+        src = state(k)
+        assert (m.x, m.y, m.yaw, m.vx) == (src.x, src.y, src.yaw, src.vx)
+        np.testing.assert_array_equal(m.wheel_speed, src.wheel_speed)
+        np.testing.assert_array_equal(m.fz, src.fz)
+    assert [m.yaw_moment for m in got["/control/mpc_command"]] == [5.0 * k for k in range(n)]
+    assert [json.loads(m.data)["state"] for m in got["/run/status"]] == ["running", "ended"]
+    meta = yaml.safe_load((folder / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["custom_data"]["fourws_state"] == "complete"
+    run = read_run(folder)
+    assert run.steps == n and run.status["state"] == "ended"
+    np.testing.assert_allclose(run.mpc_command["yaw_moment"], 5.0 * np.arange(n))
+    np.testing.assert_array_equal(run.reference["x"], np.linspace(0, 100, 101))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["sigint", "sigterm"])
+def test_stopped_recorder_leaves_a_whole_bag_with_every_message(graph, ros, tmp_path, sig):
+    out = tmp_path / "run" / "bag"
+    sup = graph([recorder(out)])
+    pub = Publisher(ros)
+    pub.wait_matched()
+    n = 250
+    pub.steps(n)
+    proc = sup.procs["recorder_node"].popen
+    os.killpg(proc.pid, sig)
+    assert proc.wait(timeout=20) == 0, sup.procs["recorder_node"].last_lines()
+    assert any("closed" in line for line in sup.procs["recorder_node"].last_lines())
+    check_complete_bag(out, n)
+
+
+def _durable_count(folder: Path) -> int:
+    meta = yaml.safe_load((folder / "metadata.yaml").read_text())
+    return int(meta["rosbag2_bagfile_information"]["message_count"])
+
+
+def test_killed_recorder_bag_is_a_clear_error_and_recovers_to_the_last_chunk(graph, ros,
+                                                                             tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    out = tmp_path / "run" / "bag"
+    sup = graph([recorder(out, chunk_size_bytes=4096)])
+    pub = Publisher(ros)
+    pub.wait_matched()
+    n = 300
+    pub.steps(n)
+    # Wait until the recorder has written what it will (its durable count stops changing).
+    last, stable_since = -1, time.monotonic()
+    while time.monotonic() - stable_since < 1.0:
+        c = _durable_count(out)
+        if c != last:
+            last, stable_since = c, time.monotonic()
+        time.sleep(0.05)
+    proc = sup.procs["recorder_node"].popen
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    mcap = out / "bag_0.mcap"
+
+    meta = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["custom_data"]["fourws_state"] == "recording"
+    durable = meta["message_count"]
+    total = 3 * n + 3  # states, commands, clock; reference; two statuses
+    assert 0 < durable < total
+
+    for p in (tmp_path / "run", out, mcap):
+        with pytest.raises(BagError) as info:
+            read_run(p)
+        assert str(mcap) in str(info.value) and "recover" in str(info.value)
+
+    fixed = tmp_path / "fixed.mcap"
+    recovered = recover(mcap, fixed)
+    assert recovered == durable
+    with AnyReader([fixed]) as r:
+        states = [r.deserialize(raw, c.msgtype) for c, _t, raw in r.messages()
+                  if c.topic == "/vehicle/state"]
+    assert len(states) > 0
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in states]
+    assert stamps == [k * DT_NS for k in range(len(states))], "a gap-free prefix of the run"
+    assert all(m.x == state(k).x for k, m in enumerate(states))
+    run = read_run(fixed)
+    assert run.steps == len(states) and run.reference is not None

@@ -1,0 +1,170 @@
+"""replay_node over real topics: a bag written here is published again, with /clock, paced,
+and in lockstep with a controller (the test node) answering each state."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+from rclpy.serialization import serialize_message
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+
+from fourws_bringup.bag import BagWriter, topic_info
+from fourws_bringup.supervisor import NodeSpec
+from fourws_common.conversions import ns_to_stamp, stamp_to_ns
+from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
+
+pytestmark = pytest.mark.integration
+
+DT_NS = 10_000_000
+
+
+def state(k: int) -> VehicleState:
+    m = VehicleState()
+    m.header.stamp = ns_to_stamp(k * DT_NS)
+    m.header.frame_id = "map"
+    m.x, m.y, m.vx, m.yaw_rate = 0.167 * k, -0.002 * k, 16.7, 0.01 * k
+    m.wheel_torque = [1.0 * k, 2.0, 3.0, 4.0]
+    return m
+
+
+def command(k: int) -> MpcCommand:
+    return MpcCommand(header=state(k).header, delta_front=1e-3 * k, delta_rear=-1e-3 * k,
+                      yaw_moment=7.0 * k)
+
+
+def reference() -> ReferenceTrajectory:
+    m = ReferenceTrajectory()
+    m.header.frame_id = "map"
+    m.x = [0.0, 1.0, 2.0]
+    m.y = m.yaw = m.curvature = [0.0, 0.0, 0.0]
+    m.speed = [16.7] * 3
+    return m
+
+
+def write_bag(folder: Path, n: int, repeat_every: int = 0) -> None:
+    """A bag as a lockstep run leaves it (clock, state, command per step; latched reference and
+    status); ``repeat_every`` adds the plant's republished states."""
+    names = ["/clock", "/vehicle/state", "/control/mpc_command", "/reference/trajectory",
+             "/run/status"]
+    w = BagWriter(folder, [topic_info(t) for t in names], chunk_size_bytes=8192)
+    t = 1_700_000_000_000_000_000
+    w.write("/reference/trajectory", serialize_message(reference()), t)
+    w.write("/run/status", serialize_message(String(data=json.dumps({"state": "running"}))), t)
+    for k in range(n):
+        t += 1_000_000
+        w.write("/clock", serialize_message(Clock(clock=ns_to_stamp(k * DT_NS))), t)
+        w.write("/vehicle/state", serialize_message(state(k)), t + 1)
+        if repeat_every and k % repeat_every == 1:
+            w.write("/vehicle/state", serialize_message(state(k)), t + 2)
+        w.write("/control/mpc_command", serialize_message(command(k)), t + 3)
+    w.close()
+
+
+def replay(bag: Path, **params) -> NodeSpec:
+    return NodeSpec(name="replay_node", package="fourws_bringup", executable="replay_node",
+                    parameters={"bag": str(bag), "wait_for_subscribers": True,
+                                "start_delay_s": 0.3, **params})
+
+
+class Listener:
+    def __init__(self, ros, topics=("/vehicle/state", "/control/mpc_command",
+                                    "/reference/trajectory", "/clock")) -> None:
+        self.states: list[tuple[float, VehicleState]] = []
+        self.cmds: list[MpcCommand] = []
+        self.refs: list[ReferenceTrajectory] = []
+        self.clock: list[int] = []
+        n = ros.node
+        if "/vehicle/state" in topics:
+            n.create_subscription(VehicleState, "/vehicle/state",
+                                  lambda m: self.states.append((time.monotonic(), m)),
+                                  CONTROL_QOS)
+        if "/control/mpc_command" in topics:
+            n.create_subscription(MpcCommand, "/control/mpc_command", self.cmds.append,
+                                  CONTROL_QOS)
+        if "/reference/trajectory" in topics:
+            n.create_subscription(ReferenceTrajectory, "/reference/trajectory", self.refs.append,
+                                  LATCHED_QOS)
+        if "/clock" in topics:
+            n.create_subscription(Clock, "/clock",
+                                  lambda m: self.clock.append(stamp_to_ns(m.clock)), CLOCK_QOS)
+
+
+def wait_done(sup, ros, timeout_s: float = 40.0) -> None:
+    proc = sup.procs["replay_node"].popen
+    assert ros.spin_until(lambda: proc.poll() is not None, timeout_s), "replay did not end"
+    ros.spin_until(lambda: False, 0.3)  # take what is still queued here
+    assert proc.returncode == 0, sup.procs["replay_node"].last_lines()
+
+
+def test_replay_publishes_every_recorded_message_with_equal_content_and_clock(graph, ros,
+                                                                              tmp_path):
+    n = 200
+    write_bag(tmp_path / "bag", n, repeat_every=10)
+    lis = Listener(ros)
+    sup = graph([replay(tmp_path / "bag", rate=0.0)])
+    wait_done(sup, ros)
+    expected_states = [state(k) for k in range(n) for _ in range(2 if k % 10 == 1 else 1)]
+    assert [m for _, m in lis.states] == expected_states, "recorded order, repeats included"
+    assert lis.cmds == [command(k) for k in range(n)]
+    assert lis.refs == [reference()]
+    assert lis.clock == [k * DT_NS for k in range(n)], "/clock from the header stamps"
+    lines = sup.procs["replay_node"].last_lines()
+    assert any(f"replayed {len(expected_states) + n + 1} messages" in x for x in lines), lines
+
+
+def test_replay_paces_by_simulated_time_and_replays_only_the_chosen_topics(graph, ros,
+                                                                           tmp_path):
+    n = 100  # 0.99 s of simulated time
+    write_bag(tmp_path / "bag", n)
+    lis = Listener(ros)
+    sup = graph([replay(tmp_path / "bag", rate=2.0, topics="[/vehicle/state]")])
+    wait_done(sup, ros)
+    assert [m for _, m in lis.states] == [state(k) for k in range(n)]
+    assert lis.cmds == [] and lis.refs == []
+    span = lis.states[-1][0] - lis.states[0][0]
+    assert span >= 0.99 / 2.0 - 0.05, f"rate 2 replayed 0.99 s of sim time in {span:.3f} s"
+
+
+def test_lockstep_replay_waits_for_the_controller_answer_of_each_state(graph, ros, tmp_path):
+    n = 30
+    slow_k = 5
+    write_bag(tmp_path / "bag", n, repeat_every=10)
+    pub = ros.node.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+    answered_at: dict[int, float] = {}
+    arrivals: list[tuple[int, float]] = []
+    pending: list[tuple[float, int]] = []
+
+    def on_state(msg: VehicleState) -> None:
+        k = stamp_to_ns(msg.header.stamp) // DT_NS
+        arrivals.append((k, time.monotonic()))
+        if k in answered_at or any(p[1] == k for p in pending):
+            return
+        pending.append((time.monotonic() + (1.0 if k == slow_k else 0.0), k))
+
+    def answer() -> None:
+        now = time.monotonic()
+        for due, k in list(pending):
+            if now >= due:
+                pending.remove((due, k))
+                answered_at[k] = time.monotonic()
+                pub.publish(command(k))
+
+    ros.node.create_subscription(VehicleState, "/vehicle/state", on_state, CONTROL_QOS)
+    ros.node.create_timer(0.002, answer)
+    sup = graph([replay(tmp_path / "bag", rate=0.0, topics="[/vehicle/state]",
+                        lockstep_topic="/control/mpc_command", lockstep_timeout_s=20.0)])
+    wait_done(sup, ros)
+    ks = [k for k, _ in arrivals]
+    assert ks == [k for k in range(n) for _ in range(2 if k % 10 == 1 else 1)]
+    first_arrival = {}
+    for k, t in arrivals:
+        first_arrival.setdefault(k, t)
+    for k in range(1, n):
+        assert first_arrival[k] > answered_at[k - 1], f"state {k} came before answer {k - 1}"
+    assert first_arrival[slow_k + 1] - first_arrival[slow_k] >= 0.9
+    assert any("0 lockstep answers missed" in x for x in sup.procs["replay_node"].last_lines())

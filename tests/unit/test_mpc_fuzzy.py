@@ -1,0 +1,73 @@
+"""Fuzzy weights, section 3.2: precomputed surfaces against skfuzzy's ControlSystemSimulation."""
+
+import math
+
+import numpy as np
+import pytest
+from skfuzzy import control as ctrl
+
+from fourws_mpc.core.fuzzy_weights import (
+    OUT_LABELS,
+    OUTPUT_NAMES,
+    RULE_TABLES,
+    FuzzyWeights,
+    mamdani,
+    skfuzzy_control_system,
+)
+
+
+@pytest.fixture(scope="module")
+def fw():
+    return FuzzyWeights()
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_online_surfaces_match_skfuzzy_control_system(fw):
+    system, names = skfuzzy_control_system()
+    sim = ctrl.ControlSystemSimulation(system)
+    rng = np.random.default_rng(42)
+    pts = np.column_stack([rng.uniform(-3, 3, 200), rng.uniform(-8, 8, 200)])
+    pts = np.vstack([pts, [[0, 0], [3, 8], [-3, -8], [1.5, -4], [0.07, 1.3]]])
+    worst = 0.0
+    for e_y, e_phi_deg in pts:
+        sim.input["e_y"] = e_y
+        sim.input["e_phi"] = e_phi_deg
+        sim.compute()
+        expected = np.array([sim.output[n] for n in names])
+        got = fw.ratios(e_y, math.radians(e_phi_deg))
+        worst = max(worst, float(np.abs(got - expected).max()))
+    assert worst < 0.01          # 1 % of the output range [0, 1]
+
+
+def test_rule_tables_shape_and_labels():
+    for name in OUTPUT_NAMES:
+        t = RULE_TABLES[name]
+        assert len(t) == 5 and all(len(row) == 5 for row in t)
+        assert all(c in OUT_LABELS for row in t for c in row)
+
+
+def test_single_rule_points_give_the_set_centroids(fw):
+    # at the ZO/ZO vertex only the centre rule fires: PB, ZO, PS, ZO (Tables 1-4)
+    c = {"ZO": 1 / 9, "PS": 1 / 3, "PM": 2 / 3, "PB": 8 / 9}
+    np.testing.assert_allclose(fw.ratios(0.0, 0.0), [c["PB"], c["ZO"], c["PS"], c["ZO"]],
+                               atol=1e-3)
+    # e_Y = PB, e_φ = NB corner: Table 1 ZO, Table 2 ZO, Table 3 PM, Table 4 ZO
+    np.testing.assert_allclose(fw.ratios(3.0, math.radians(-8.0)),
+                               [c["ZO"], c["ZO"], c["PM"], c["ZO"]], atol=1e-3)
+    # e_Y = NB, e_φ = NB corner: ZO, PB, PM, PB
+    np.testing.assert_allclose(fw.ratios(-3.0, math.radians(-8.0)),
+                               [c["ZO"], c["PB"], c["PM"], c["PB"]], atol=1e-3)
+
+
+def test_inputs_are_clipped_to_the_universes(fw):
+    np.testing.assert_allclose(fw.ratios(10.0, 1.0), fw.ratios(3.0, math.radians(8.0)))
+    np.testing.assert_allclose(fw.ratios(-10.0, -1.0), fw.ratios(-3.0, math.radians(-8.0)))
+
+
+def test_ratios_lie_in_unit_interval_and_grid_is_exact_at_nodes(fw):
+    s = fw.surfaces
+    assert s.min() >= 0.0 and s.max() <= 1.0
+    iy, ip = 37, 101
+    direct = mamdani(np.array(fw.gy[iy]), np.array(fw.gp[ip]))
+    np.testing.assert_allclose(fw.ratios(fw.gy[iy], math.radians(fw.gp[ip])), direct,
+                               atol=1e-9)

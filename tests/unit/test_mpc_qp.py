@@ -1,0 +1,202 @@
+"""QP of eq. (5)-(20): prediction matrices, unconstrained optimum, constraints, OSQP instances."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fourws_mpc.core import qp as Q
+from fourws_mpc.core.model import ModelParams, StateIdx, discretise
+
+P = ModelParams()
+V = 60 / 3.6
+
+
+def _model(seed=0, vx=V):
+    rng = np.random.default_rng(seed)
+    z = np.array([rng.uniform(-0.3, 0.3), vx, rng.uniform(-0.1, 0.1), rng.uniform(-0.2, 0.2),
+                  rng.uniform(-0.5, 0.5), 0.0])
+    u = np.array([rng.uniform(-0.02, 0.02), rng.uniform(-0.01, 0.01), rng.uniform(-200, 200)])
+    Ak, Bk, dk = discretise(z, u, P, 0.01)
+    return z, u, Ak, Bk, dk
+
+
+def _bounds(enabled=(True, True, True), state_bounds=False, band=(10.0, 10.0)):
+    return Q.QpBounds(
+        du_max=np.array([math.radians(0.8), math.radians(0.6), 300.0]),
+        u_max=np.array([math.radians(30), math.radians(10), 1500.0]),
+        enabled=np.array(enabled), vy_max=1.0, r_max=0.5, band_phi=band[0], band_y=band[1],
+        state_bounds=state_bounds)
+
+
+def test_matrix_powers_match_numpy():
+    A = np.random.default_rng(1).normal(size=(9, 9)) * 0.3
+    Pw = Q.matrix_powers(A, 30)
+    for k in (0, 1, 2, 7, 16, 29, 30):
+        np.testing.assert_allclose(Pw[k], np.linalg.matrix_power(A, k), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_p,n_c", [(12, 6), (30, 10), (10, 3), (5, 5), (1, 1)])
+def test_prediction_matrices_match_explicit_simulation(n_p, n_c):
+    z, u, Ak, Bk, dk = _model(n_p)
+    Aa, Ba, da = Q.augment(Ak, Bk, dk)
+    C = Q.output_matrix()
+    psi, theta, gamma = Q.prediction_matrices(Aa, Ba, C, n_p, n_c)
+    rng = np.random.default_rng(7)
+    dU = rng.normal(size=(n_c, 3)) * np.array([0.01, 0.01, 100.0])
+    xi = np.concatenate([z, u])
+    ys = []
+    for i in range(n_p):
+        du = dU[i] if i < n_c else np.zeros(3)
+        xi = Aa @ xi + Ba @ du + da
+        ys.append(C @ xi)
+    expected = np.concatenate(ys)
+    got = psi @ np.concatenate([z, u]) + theta @ dU.reshape(-1) + gamma @ da
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12)
+    # the augmented model itself: u(k-1) carried, ζ(k+1) = A ζ + B u + d
+    xi0 = np.concatenate([z, u])
+    x1 = Aa @ xi0 + Ba @ dU[0] + da
+    np.testing.assert_allclose(x1[:6], Ak @ z + Bk @ (u + dU[0]) + dk)
+    np.testing.assert_allclose(x1[6:], u + dU[0])
+
+
+def _batch_ls_oracle(Ak, Bk, dk, z, u, ref, n_p, n_c, q, r):
+    """Explicit unit-response simulation + least squares, independent of prediction_matrices."""
+    def sim(dU):
+        zz, uu, out = z.copy(), u.copy(), []
+        for i in range(n_p):
+            if i < n_c:
+                uu = uu + dU[3 * i:3 * i + 3]
+            zz = Ak @ zz + Bk @ uu + dk
+            out.append([zz[StateIdx.PHI], zz[StateIdx.Y]])
+        return np.array(out).reshape(-1)
+    y0 = sim(np.zeros(3 * n_c))
+    S = np.column_stack([sim(np.eye(3 * n_c)[j]) - y0 for j in range(3 * n_c)])
+    w = np.sqrt(np.tile(q, n_p))
+    rw = np.sqrt(np.tile(r, n_c))
+    M = np.vstack([w[:, None] * S, np.diag(rw)])
+    b = np.concatenate([w * (ref.reshape(-1) - y0), np.zeros(3 * n_c)])
+    return np.linalg.lstsq(M, b, rcond=None)[0].reshape(n_c, 3)
+
+
+@pytest.mark.parametrize("n_p,n_c", [(12, 6), (30, 10), (20, 7)])
+def test_unconstrained_solution_matches_batch_least_squares(n_p, n_c):
+    z, u, Ak, Bk, dk = _model(3)
+    ref = np.column_stack([np.linspace(0, 0.002, n_p), z[StateIdx.Y] + np.linspace(0, 0.01, n_p)])
+    q = np.array([50.0, 40.0])
+    r = np.array([2e4, 2e4, 1e-4])
+    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000, polishing=True))
+    sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, q, r, 1e3, _bounds())
+    assert sol.ok, sol.status
+    expected = _batch_ls_oracle(Ak, Bk, dk, z, u, ref, n_p, n_c, q, r)
+    assert np.all(np.abs(sol.du_scaled) < 0.99), "test needs inactive constraints"
+    scale = np.array([1e-3, 1e-3, 1.0])
+    np.testing.assert_allclose(sol.du / scale, expected / scale, atol=1e-5)
+    np.testing.assert_allclose(sol.u, u + np.cumsum(expected, axis=0), atol=1e-6 * 300)
+    assert sol.slack == pytest.approx(0.0, abs=1e-7)
+
+
+def test_first_move_matches_finite_horizon_lqr():
+    """Nc = Np: the first increment equals −K0 ξ of the Riccati recursion (ref 0, d 0)."""
+    n = 15
+    z, u, Ak, Bk, _ = _model(4)
+    dk = np.zeros(6)
+    Aa, Ba, _ = Q.augment(Ak, Bk, dk)
+    C = Q.output_matrix()[:2]
+    q = np.array([50.0, 40.0])
+    r = np.array([3e4, 3e4, 1e-3])
+    Qy = C.T @ np.diag(q) @ C
+    Pm = Qy.copy()
+    for i in range(n - 1, -1, -1):
+        K = np.linalg.solve(np.diag(r) + Ba.T @ Pm @ Ba, Ba.T @ Pm @ Aa)
+        Pm = (Qy if i >= 1 else 0 * Qy) + Aa.T @ Pm @ (Aa - Ba @ K)
+    xi = np.concatenate([z, u])
+    du0 = -K @ xi
+    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polishing=True))
+    sol = qp.solve(Ak, Bk, dk, z, u, np.zeros((n, 2)), n, n, q, r, 1e3,
+                   _bounds(band=(100.0, 100.0)))
+    assert sol.ok
+    assert np.all(np.abs(sol.du_scaled) < 0.99)
+    np.testing.assert_allclose(sol.du[0] / [1e-3, 1e-3, 1], du0 / [1e-3, 1e-3, 1], atol=1e-5)
+
+
+@pytest.mark.parametrize("enabled", [(True, True, True), (True, False, False), (True, True, False)])
+@pytest.mark.parametrize("start_deg", [0.0, 29.7])
+def test_constraints_are_respected(enabled, start_deg):
+    z, u, Ak, Bk, dk = _model(5)
+    u = np.array([math.radians(start_deg), 0.0, 0.0])
+    n_p, n_c = 20, 8
+    ref = np.column_stack([np.full(n_p, 0.3), np.full(n_p, 5.0)])   # far away: wants a lot
+    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-6, eps_rel=1e-6, max_iter=20000))
+    b = _bounds(enabled)
+    sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([50.0, 40.0]),
+                   np.array([1.0, 1.0, 1e-6]), 1e3, b)
+    assert sol.ok
+    assert np.all(np.abs(sol.du) <= b.du_max + 1e-12)
+    assert np.all(np.abs(sol.u) <= b.u_max + 1e-12)
+    np.testing.assert_allclose(sol.u, u + np.cumsum(sol.du, axis=0), atol=1e-9)
+    for c, on in enumerate(enabled):
+        if not on:
+            assert np.all(sol.du[:, c] == 0.0) and np.all(sol.u[:, c] == 0.0)
+    if start_deg == 0.0:       # the rate bound is active on the first move
+        assert sol.du_scaled[0, 0] == pytest.approx(1.0, abs=1e-3)
+    else:                      # the position bound is reached
+        assert sol.u[:, 0].max() == pytest.approx(math.radians(30), abs=1e-5)
+
+
+def test_soft_bounds_use_the_slack():
+    z, u, Ak, Bk, dk = _model(6)
+    n_p, n_c = 12, 6
+    ref = np.column_stack([np.zeros(n_p), np.full(n_p, z[StateIdx.Y] + 2.0)])  # 2 m off
+    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
+    sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([1.0, 1.0]),
+                   np.array([1.0, 1.0, 1.0]), 1.0, _bounds(band=(math.radians(8), 0.5)))
+    assert sol.ok
+    # |Y − Y_ref| ≈ 2 m > 0.5 m band: ε ≥ (2 − 0.5)/0.5 − tiny movement within 0.12 s
+    assert sol.slack > 2.5
+
+
+def test_hard_state_bounds_hold_and_infeasibility_is_reported():
+    z, u, Ak, Bk, dk = _model(7)
+    n_p, n_c = 12, 6
+    ref = np.column_stack([np.zeros(n_p), np.full(n_p, z[StateIdx.Y] + 1.0)])
+    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
+    b = _bounds(state_bounds=True)
+    b = Q.QpBounds(b.du_max, b.u_max, b.enabled, vy_max=0.35, r_max=0.25, band_phi=1.0,
+                   band_y=5.0, state_bounds=True)
+    sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([1.0, 1e3]),
+                   np.array([1e-3, 1e-3, 1e-3]), 1.0, b)
+    assert sol.ok
+    Aa, Ba, da = Q.augment(Ak, Bk, dk)
+    xi = np.concatenate([z, u])
+    for i in range(n_p):
+        xi = Aa @ xi + Ba @ (sol.du[i] if i < n_c else np.zeros(3)) + da
+        assert abs(xi[StateIdx.VY]) <= 0.35 + 1e-4
+        assert abs(xi[StateIdx.R]) <= 0.25 + 1e-4
+    # a yaw rate far above its bound cannot be brought back within one step: infeasible
+    z2 = z.copy()
+    z2[StateIdx.R] = 0.6
+    Ak, Bk, dk = discretise(z2, u, P, 0.01)
+    sol = qp.solve(Ak, Bk, dk, z2, u, ref, n_p, n_c, np.array([1.0, 1e3]),
+                   np.array([1e-3, 1e-3, 1e-3]), 1.0, b)
+    assert not sol.ok
+    assert "infeasible" in sol.status
+    assert np.all(np.isfinite(sol.du))
+
+
+def test_one_warm_started_instance_per_horizon_pair():
+    z, u, Ak, Bk, dk = _model(8)
+    qp = Q.MpcQp()
+    args = (np.array([50.0, 40.0]), np.array([1e4, 1e4, 1e-4]), 1e3, _bounds())
+    ref = np.zeros((30, 2))
+    qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args)
+    inst = qp.instance(12, 6)
+    solver = inst.solver
+    qp.solve(Ak, Bk, dk, z, u, ref[:20], 20, 7, *args)
+    sol = qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args)
+    assert qp.instance(12, 6) is inst and inst.solver is solver
+    assert set(qp.instances) == {(12, 6), (20, 7)}
+    assert inst.uses == 2
+    # the second identical solve starts from the previous solution: few iterations
+    sol2 = qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args, warm_du_scaled=sol.du_scaled)
+    assert sol2.ok and sol2.iterations <= sol.iterations

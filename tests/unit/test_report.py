@@ -1,0 +1,150 @@
+"""fourws_bringup.report: plotted quantities against closed-form cases, figure files, Markdown.
+
+Oracle: a straight reference path along X, on which the lateral error of a pose is its Y
+offset and the heading error its yaw, so every plotted error and metric is known exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fourws_bringup.bag import BagError, RunData
+from fourws_bringup.core.metrics import compute_metrics
+from fourws_bringup.report import (
+    draw_comparison,
+    draw_figures,
+    figures_markdown,
+    metrics_from_run,
+    metrics_table_markdown,
+    series_of,
+)
+
+DT = 0.01
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def make_run(n: int = 300, offset: float = 0.1, with_reference: bool = True,
+             with_diagnostics: bool = True, name: str = "improved") -> RunData:
+    k = np.arange(n)
+    stamps = (k * 10_000_000).astype(np.int64)
+    t = stamps * 1e-9
+    y = offset * np.sin(2 * np.pi * t / 3.0)
+    yaw = 0.05 * np.sin(2 * np.pi * t / 2.0)
+    state = {"stamp_ns": stamps, "t_s": t, "x": 5.0 + 16.7 * t, "y": y, "yaw": yaw,
+             "vx": np.full(n, 16.7), "vy": 0.1 * np.sin(t), "yaw_rate": np.gradient(yaw, DT),
+             "ax": np.zeros(n), "ay": np.zeros(n), "sideslip": np.arctan2(0.1 * np.sin(t), 16.7),
+             "steer_front": np.zeros(n), "steer_rear": np.zeros(n),
+             "wheel_speed": np.ones((n, 4)), "wheel_torque": np.zeros((n, 4)),
+             "fx": np.zeros((n, 4)), "fy": np.zeros((n, 4)), "fz": np.full((n, 4), 1800.0),
+             "mu": np.full((n, 4), 0.5)}
+    diag = {"stamp_ns": stamps[::2], "t_s": t[::2]}
+    if with_diagnostics:
+        m = len(diag["stamp_ns"])
+        diag.update({"controller": np.array([name] * m, dtype=object),
+                     "np": 12 + (np.arange(m) // 50) % 9, "nc": 6 + (np.arange(m) // 50) % 5,
+                     "q_y": np.full(m, 4000.0), "q_phi": np.full(m, 2500.0),
+                     "r_ddelta": np.full(m, 40000.0), "r_dmz": np.full(m, 30000.0),
+                     "lateral_error": y[::2], "heading_error": yaw[::2],
+                     "solve_time_ms": np.linspace(1.0, 3.0, m)})
+    ref = None
+    if with_reference:
+        xs = np.linspace(0.0, 200.0, 401)
+        ref = {"x": xs, "y": np.zeros_like(xs), "yaw": np.zeros_like(xs),
+               "curvature": np.zeros_like(xs), "speed": np.full_like(xs, 16.7),
+               "stamp_ns": np.int64(0)}
+    cmd = {"stamp_ns": stamps, "t_s": t, "delta_front": np.zeros(n), "delta_rear": np.zeros(n),
+           "yaw_moment": 100.0 * np.sin(t)}
+    wt = {"stamp_ns": stamps, "t_s": t, "torque": np.tile([10.0, 11.0, 12.0, 13.0], (n, 1))}
+    empty = {"stamp_ns": np.zeros(0, np.int64), "t_s": np.zeros(0)}
+    return RunData(path=Path(f"/runs/{name}/bag/bag_0.mcap"), state=state, mpc_command=cmd,
+                   mpc_diagnostics=diag, drive_command=empty, wheel_torques=wt,
+                   reference=ref, status={"scenario": "straight", "completed": True},
+                   message_counts={})
+
+
+def test_plotted_errors_on_a_straight_path_are_the_offset_and_the_yaw():
+    run = make_run()
+    s = series_of(run)
+    np.testing.assert_allclose(s.lateral_error, run.state["y"], atol=1e-12)
+    np.testing.assert_allclose(s.heading_error, run.state["yaw"], atol=1e-12)
+    np.testing.assert_allclose(s.ref_heading, 0.0, atol=1e-12)
+    np.testing.assert_array_equal(s.torque[:, 3], 13.0)
+
+
+def test_metrics_from_run_are_the_core_metrics_of_the_exact_errors():
+    run = make_run()
+    m = metrics_from_run(run)
+    exact = compute_metrics(run.state["y"], run.state["yaw"], run.state["sideslip"],
+                            run.mpc_diagnostics["solve_time_ms"])
+    for key, v in exact.items():
+        assert m[key] == pytest.approx(v, rel=1e-9, abs=1e-12), key
+    assert m["max_abs_lateral_error_m"] == pytest.approx(0.1, rel=1e-3)
+    assert m["steps"] == 300 and m["sim_time_s"] == pytest.approx(2.99)
+
+
+def test_metrics_need_a_reference():
+    with pytest.raises(BagError, match="reference"):
+        metrics_from_run(make_run(with_reference=False))
+
+
+def test_without_a_reference_the_mpc_diagnostics_errors_are_plotted_by_stamp():
+    s = series_of(make_run(with_reference=False))
+    np.testing.assert_allclose(s.lateral_error[::2], make_run().state["y"][::2])
+    assert np.all(np.isnan(s.lateral_error[1::2]))
+    assert s.ref_xy is None
+
+
+def _is_png(p: Path) -> bool:
+    import matplotlib.image as mpimg
+
+    return p.read_bytes()[:8] == PNG_MAGIC and mpimg.imread(p).shape[0] > 100
+
+
+def test_draw_figures_writes_every_figure_as_png(tmp_path):
+    paths = draw_figures(make_run(), tmp_path / "plots")
+    names = {p.name for p in paths}
+    assert names == {"overview.png", "trajectory.png", "lateral_error.png",
+                     "heading_error.png", "heading.png", "sideslip.png", "yaw_rate.png",
+                     "horizons_weights.png", "wheel_torques.png"}
+    assert all(p.parent == tmp_path / "plots" and _is_png(p) for p in paths)
+
+
+def test_no_horizon_figure_without_diagnostics(tmp_path):
+    paths = draw_figures(make_run(with_diagnostics=False), tmp_path)
+    assert "horizons_weights.png" not in {p.name for p in paths}
+    assert len(paths) == 8
+
+
+def test_draw_comparison_overlays_runs(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    runs = {"MPC-4WS": make_run(offset=0.2, name="mpc_4ws"),
+            "Improved MPC-4WS": make_run(offset=0.1)}
+    paths = draw_comparison(runs, tmp_path, "DLC 60 km/h, mu 0.5")
+    assert {p.name for p in paths} >= {"comparison_overview.png", "comparison_lateral_error.png",
+                                       "comparison_horizons_weights.png",
+                                       "comparison_wheel_torques.png"}
+    assert all(_is_png(p) for p in paths)
+    with pytest.raises(ValueError):
+        draw_comparison({}, tmp_path, "none")
+
+
+def test_empty_run_is_a_bag_error(tmp_path):
+    run = make_run()
+    run.state = {"stamp_ns": np.zeros(0, np.int64), "t_s": np.zeros(0)}
+    with pytest.raises(BagError, match="no /vehicle/state"):
+        draw_figures(run, tmp_path)
+
+
+def test_markdown_helpers():
+    table = metrics_table_markdown({"improved": {"a": 0.0891, "b": math.nan, "c": True}},
+                                   ["a", "b", "c"], ["max eY m", "RMSE", "ok"])
+    assert table.splitlines() == ["| run | max eY m | RMSE | ok |", "|---|---|---|---|",
+                                  "| improved | 0.0891 | n/a | True |"]
+    md = figures_markdown([Path("/r/x/plots/lateral_error.png")], "/r", heading="Figures")
+    assert md == "### Figures\n\n![lateral error](x/plots/lateral_error.png)\n"
