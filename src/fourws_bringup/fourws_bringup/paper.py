@@ -59,10 +59,9 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     ``outcome`` adds what only the live run knows (wall time, a node that died).
     """
     from .bag import read_run
-    from .core.metrics import run_metrics
 
     run = read_run(path)
-    m = run_metrics(run)
+    m = metrics_from_run(run)
     status = run.status or {}
     scenario = scenario or status.get("scenario") or "unknown"
     controller = controller or (run.controller or "unknown")
@@ -82,6 +81,35 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
         out["completed"] = bool(status.get("completed", False))
         out["reason"] = str(status.get("reason", "no /run/status in the bag"))
     return out
+
+
+def metrics_from_run(run) -> dict:
+    """Table 6-8 metrics, solve-time percentiles, deadline misses and horizon ranges of a
+    decoded bag (:class:`fourws_bringup.bag.RunData`)."""
+    import numpy as np
+
+    from fourws_mpc.core.reference import Reference
+
+    from .bag import BagError
+    from .core.metrics import run_metrics
+
+    if run.reference is None or run.steps == 0:
+        raise BagError(f"{run.path}: no /reference/trajectory or no /vehicle/state recorded")
+    r = run.reference
+    ref = Reference.from_arrays(r["x"], r["y"], r["yaw"], r["curvature"], r["speed"])
+    s = run.state
+    diag = run.mpc_diagnostics
+    solve = diag.get("solve_time_ms", np.zeros(0))
+    m = run_metrics(ref, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"], s["vy"], s["sideslip"],
+                    solve if len(solve) else None)
+    m["deadline_misses"] = int(np.sum(np.asarray(solve) > DEADLINE_MS))
+    for key in ("np", "nc"):
+        v = diag.get(key)
+        if v is not None and len(v):
+            m[f"{key}_min"], m[f"{key}_max"] = int(np.min(v)), int(np.max(v))
+    fb = diag.get("fallback")
+    m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
+    return m
 
 
 def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,

@@ -92,6 +92,7 @@ class PlantNode(Node):
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
         self.done = False
+        self.ended = False
         self.exit_code = 0
         self.steer_cmd = (0.0, 0.0)
         self.torque_cmd = np.zeros(4)
@@ -154,7 +155,7 @@ class PlantNode(Node):
         return False
 
     def _on_mpc(self, msg: MpcCommand) -> None:
-        if self.done:
+        if self.ended:
             return
         if self.params.config.mode == "realtime":
             if self._valid_cmd(msg):
@@ -168,7 +169,7 @@ class PlantNode(Node):
         self._try_step()
 
     def _on_torques(self, msg: WheelTorques) -> None:
-        if self.done:
+        if self.ended:
             return
         if self.params.config.mode == "realtime":
             if self._valid_torques(msg):
@@ -217,11 +218,11 @@ class PlantNode(Node):
         return ended, reason, ended and not reason.startswith("aborted")
 
     def _realtime_tick(self) -> None:
-        if not self.done:
+        if not self.ended:
             self._advance()
 
     def _lockstep_watchdog(self) -> None:
-        if self.done:
+        if self.ended:
             return
         cfg = self.params.config
         now = time.monotonic()
@@ -247,6 +248,12 @@ class PlantNode(Node):
         self.get_logger().info(
             f"run ended at t = {self.outputs.t_s:.2f} s after {self.step_k} steps: {reason}")
         self._publish_status("ended", reason, completed)
+        self.ended = True
+        # Linger briefly so reliable subscribers (recorder, runner) receive the final
+        # state and status before the process exits.
+        self._exit_timer = self.create_timer(0.5, self._exit)
+
+    def _exit(self) -> None:
         self.done = True
 
     # -- outputs -------------------------------------------------------------------------
