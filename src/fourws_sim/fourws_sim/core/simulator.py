@@ -3,7 +3,8 @@
 ``Simulator.step`` holds the commands (δf, δr, four wheel torques) constant for ``dt_s``
 (zero-order hold, as a 100 Hz controller does) and integrates the 22-state model of
 ``vehicle.py`` with classical RK4 at ``substep_s`` (default 1 ms; ``dt_s`` must be an integer
-multiple). Commands outside the actuator limits are clipped (``last_clipped`` names the
+multiple; from 2.5 ms up the wheel-spin mode goes unstable at low speed, see ``vehicle.py``).
+Commands outside the actuator limits are clipped (``last_clipped`` names the
 channels, for the node to warn); non-finite commands raise ``ValueError``. The road μ under
 each wheel is sampled at the start of each substep.
 
@@ -87,8 +88,8 @@ class Simulator:
         initial: InitialState,
         substep_s: float = 0.001,
     ) -> None:
-        if not (math.isfinite(substep_s) and 1e-5 <= substep_s <= 0.05):
-            raise ValueError(f"substep_s: {substep_s} is outside [1e-05, 0.05] s")
+        if not (math.isfinite(substep_s) and 1e-5 <= substep_s <= 0.01):
+            raise ValueError(f"substep_s: {substep_s} is outside [1e-05, 0.01] s")
         self.vehicle = vehicle
         self.road = road
         self.initial = initial

@@ -38,13 +38,15 @@ centres at ground level, i.e. all lateral transfer goes through the springs)::
 with â_x, â_y the CG accelerations passed through a first-order lag of time constant
 ``load_transfer_time_constant_s`` (two states). This avoids the algebraic loop between the
 loads and the accelerations they produce, and stands for the roll and pitch response of the
-sprung mass (a ≈ 1.6 Hz, ζ ≈ 0.4 roll mode lags by about 2ζ/ω_n ≈ 0.08 s); in steady state
+sprung mass (a roll mode of ≈ 1.6 Hz and ζ ≈ 0.4 lags by about 2ζ/ω_n ≈ 0.08 s); in steady state
 it equals the quasi-static transfer. Loads are clipped at 0 (wheel lift).
 
 Numerics: the wheel-spin mode has the eigenvalue λ ≈ −R² K_κ / (I_w max(|v_x|, v_min))
 (K_κ = c_κ F_z). Fixed-step RK4 at h = 1 ms is stable for |λ| h < 2.78, which with the
 default parameters holds for loads up to ≈ 2 × static at any speed because the slip
-denominator is floored at ``slip_speed_min_mps`` = 2.5 m/s.
+denominator is floored at ``slip_speed_min_mps`` = 2.5 m/s. A 2 ms substep is at the edge
+(measured: still stable accelerating from rest; from 2.5 ms up the wheel-spin mode rings or
+diverges at low speed), so keep the default 1 ms.
 
 The derivative function :meth:`TwoTrackModel.derivatives` is written in plain Python floats
 (tuple unpacking in :class:`State` order, no numpy): on 4-element arrays numpy's call overhead
