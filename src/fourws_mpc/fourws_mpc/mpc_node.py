@@ -76,7 +76,9 @@ class MpcNode(Node):
             return
         meas = VehicleSample(**{k: float(getattr(msg, k)) for k in STATE_FIELDS})
         t0 = time.perf_counter()
-        res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref)
+        mu = float(np.mean(msg.mu))
+        res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref,
+                             mu=mu if np.isfinite(mu) and mu > 0.0 else None)
         solve_ms = (time.perf_counter() - t0) * 1e3
         cmd = MpcCommand(delta_front=res.delta_front, delta_rear=res.delta_rear,
                          yaw_moment=res.yaw_moment)
