@@ -179,3 +179,16 @@ def test_killed_recorder_bag_is_a_clear_error_and_recovers_to_the_last_chunk(gra
     assert all(m.x == state(k).x for k, m in enumerate(states))
     run = read_run(fixed)
     assert run.steps == len(states) and run.reference is not None
+
+
+def test_recorder_refuses_a_non_empty_output_folder_naming_the_parameter(graph, tmp_path):
+    from fourws_bringup.supervisor import NodeDied
+
+    out = tmp_path / "bag"
+    out.mkdir()
+    (out / "old.mcap").write_bytes(b"x")
+    with pytest.raises(NodeDied) as info:
+        graph([recorder(out)])
+    assert info.value.returncode == 2
+    assert any("output_dir" in line and str(out) in line for line in info.value.last_lines)
+    assert (out / "old.mcap").read_bytes() == b"x"

@@ -106,7 +106,7 @@ def test_replay_publishes_every_recorded_message_with_equal_content_and_clock(gr
     n = 200
     write_bag(tmp_path / "bag", n, repeat_every=10)
     lis = Listener(ros)
-    sup = graph([replay(tmp_path / "bag", rate=0.0)])
+    sup = graph([replay(tmp_path / "bag", rate=2.0)])
     wait_done(sup, ros)
     expected_states = [state(k) for k in range(n) for _ in range(2 if k % 10 == 1 else 1)]
     assert [m for _, m in lis.states] == expected_states, "recorded order, repeats included"

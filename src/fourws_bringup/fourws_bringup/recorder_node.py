@@ -24,6 +24,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -102,8 +103,12 @@ class RecorderNode(Node):
         self._lock = threading.Lock()
         self._finalised = False
         self.writer: BagWriter | None = None
+        self._stop_requested_at: float | None = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
         self.params = ParamBinding(self, RecorderConfig)
-        self.declare_parameter("topics", list(DEFAULT_TOPICS))
+        self.declare_parameter("topics", list(DEFAULT_TOPICS), ParameterDescriptor(
+            description="topics to record: graph topic names, or '/name:pkg/msg/Type'"))
         self.add_on_set_parameters_callback(self._reject_runtime_change)
         cfg = self.params.config
         specs = self.get_parameter("topics").value
@@ -127,12 +132,9 @@ class RecorderNode(Node):
         self.context.on_shutdown(self.finalise)
         self.received = 0
         self._last_rx = time.monotonic()
-        self._stop_requested_at: float | None = None
         for info in infos:
             self.create_subscription(classes[info.name], info.name, self._callback(info.name),
                                      profiles[info.name], raw=True)
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._on_signal)
         self.create_timer(0.05, self._check_stop)
         self.get_logger().info(
             f"recording {len(infos)} topics to {self.writer.path} (chunks of "

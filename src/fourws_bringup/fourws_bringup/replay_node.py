@@ -8,7 +8,9 @@ than every stamp so far.
 Timing: with ``pacing: stamp`` a message is due at ``t0 + (s - s0) / rate``, ``s`` the
 largest header stamp so far (simulated time, so ``rate: 1`` is real time); with
 ``pacing: recorded`` the recorded receive times are used instead. ``rate: 0`` publishes as
-fast as possible.
+fast as possible: a subscriber slower than that loses the oldest messages beyond its KEEP_LAST
+depth (100 on the graph's topics), as with ``ros2 bag play``; use ``lockstep_topic`` to replay
+at the pace of a controller instead.
 
 Lockstep (``lockstep_topic``, e.g. ``/control/mpc_command``): after publishing a
 ``lockstep_trigger`` message (``/vehicle/state``) stamped k, nothing more is published until a
@@ -26,6 +28,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -64,11 +67,8 @@ class ReplayConfig:
                                   hi=3600.0, unit="s")
     start_delay_s: float = param(0.0, "wall time to wait before the first message", lo=0.0,
                                  hi=3600.0, unit="s")
-    max_unacked: int = param(20, "flow control: publish at most this many messages, then "
-                             "wait until reliable subscribers have acknowledged them (0: off)",
-                             lo=0, hi=100000)
-    ack_timeout_s: float = param(2.0, "at the end, wait this long for reliable subscribers "
-                                 "to acknowledge", lo=0.0, hi=60.0, unit="s")
+    ack_timeout_s: float = param(1.0, "at the end, wait at most this long for reliable "
+                                 "subscribers to acknowledge", lo=0.0, hi=60.0, unit="s")
 
     def __post_init__(self) -> None:
         if not self.bag:
@@ -97,7 +97,10 @@ class ReplayNode(Node):
         self.exit_code = 0
         self.params = ParamBinding(self, ReplayConfig)
         cfg = self.cfg = self.params.config
-        topics_param = self.declare_parameter("topics", Parameter.Type.STRING_ARRAY).value
+        topics_param = self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
+                                              ParameterDescriptor(description=(
+                                                  "topics to replay (unset: every recorded "
+                                                  "topic but /clock and /run/status)"))).value
         try:
             self.bag = McapBag(cfg.bag)
         except BagError as exc:
@@ -185,9 +188,7 @@ class ReplayNode(Node):
                     f"no {self.cfg.lockstep_topic} stamped {stamp} ns within "
                     f"{self.cfg.lockstep_timeout_s:.1f} s; going on")
             self._waiting = None
-        if self.cfg.max_unacked and not self._all_acked():
-            return
-        for _ in range(self.cfg.max_unacked or BATCH):
+        for _ in range(BATCH):
             if self._next is None:
                 self._next = next(self._messages, None)
                 if self._next is None:
@@ -228,10 +229,6 @@ class ReplayNode(Node):
         self.pubs[topic].publish(bytes(data))
         self.counts[topic] += 1
 
-    def _all_acked(self) -> bool:
-        zero = Duration(seconds=0)
-        return all(p.wait_for_all_acked(zero) for p in self.pubs.values())
-
     def _unmatched(self) -> list[str]:
         out = [t for t, p in self.pubs.items() if p.get_subscription_count() < 1]
         if self.lockstep and self.count_publishers(self.cfg.lockstep_topic) < 1:
@@ -243,11 +240,10 @@ class ReplayNode(Node):
 
     def _finish(self) -> None:
         self._timer.cancel()
-        timeout = Duration(seconds=self.cfg.ack_timeout_s)
-        for p in self.pubs.values():
-            p.wait_for_all_acked(timeout)
-        if self.clock_pub is not None:
-            self.clock_pub.wait_for_all_acked(timeout)
+        deadline = time.monotonic() + self.cfg.ack_timeout_s
+        pubs = [*self.pubs.values(), *([self.clock_pub] if self.clock_pub else [])]
+        for p in pubs:
+            p.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
         total = sum(self.counts.values())
         wall = time.monotonic() - self._t0
         self.get_logger().info(
