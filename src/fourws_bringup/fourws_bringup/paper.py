@@ -84,25 +84,17 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
 
 
 def metrics_from_run(run) -> dict:
-    """Table 6-8 metrics, solve-time percentiles, deadline misses and horizon ranges of a
-    decoded bag (:class:`fourws_bringup.bag.RunData`)."""
+    """Table 6-8 metrics (:func:`fourws_bringup.report.metrics_from_run`) plus deadline
+    misses, solver fallbacks and the horizon ranges of a decoded bag."""
     import numpy as np
 
-    from fourws_mpc.core.reference import Reference
+    from .report import metrics_from_run as core_metrics
 
-    from .bag import BagError
-    from .core.metrics import run_metrics
-
-    if run.reference is None or run.steps == 0:
-        raise BagError(f"{run.path}: no /reference/trajectory or no /vehicle/state recorded")
-    r = run.reference
-    ref = Reference.from_arrays(r["x"], r["y"], r["yaw"], r["curvature"], r["speed"])
-    s = run.state
+    m = core_metrics(run)
+    m["steps"] = max(run.steps - 1, 0)  # control steps: the last state gets no command
     diag = run.mpc_diagnostics
-    solve = diag.get("solve_time_ms", np.zeros(0))
-    m = run_metrics(ref, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"], s["vy"], s["sideslip"],
-                    solve if len(solve) else None)
-    m["deadline_misses"] = int(np.sum(np.asarray(solve) > DEADLINE_MS))
+    solve = np.asarray(diag.get("solve_time_ms", np.zeros(0)), dtype=float)
+    m["deadline_misses"] = int(np.sum(solve > DEADLINE_MS))
     for key in ("np", "nc"):
         v = diag.get(key)
         if v is not None and len(v):

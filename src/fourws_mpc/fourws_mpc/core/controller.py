@@ -104,7 +104,7 @@ class MpcConfig:
                               lo=5, hi=2001)
     fuzzy_grid_phi: int = param(161, "precomputed response-surface grid points along e_φ",
                                 lo=5, hi=2001)
-    fuzzy_out_points: int = param(501, "samples of the output universe [0, 1]", lo=11,
+    fuzzy_out_points: int = param(201, "samples of the output universe [0, 1]", lo=11,
                                   hi=10001)
     # cost scaling (one for all controllers)
     scale_y_m: float = param(0.5, "characteristic lateral error s_Y", lo=1e-6, hi=100.0,
@@ -181,6 +181,8 @@ class MpcConfig:
     osqp_max_iter: int = param(4000, "OSQP iteration limit", lo=10, hi=1000000)
     osqp_polishing: bool = param(False, "OSQP solution polishing")
     osqp_accept_inaccurate: bool = param(False, "trust OSQP status 'solved inaccurate'")
+    osqp_prebuild: bool = param(True, "set up the OSQP instance of every reachable (N_p, N_c) "
+                                "at start-up (no set-up cost inside the control loop)")
     ref_search_back: int = param(50, "nearest-point window behind the last index", lo=1,
                                  hi=1000000, unit="samples")
     ref_search_ahead: int = param(400, "nearest-point window ahead of the last index", lo=2,
@@ -246,6 +248,16 @@ class MpcConfig:
             e_phi_max=math.radians(self.apcha_e_phi_max_deg),
             du_max=tuple(float(v) for v in self.du_max), dt_s=self.dt_s,
             np_rate_limit=self.apcha_np_rate_limit, nc_base=self.apcha_nc_base)
+
+    def horizon_pairs(self) -> list[tuple[int, int]]:
+        """Every (N_p, N_c) this configuration can use (baseline; all pairs of eq. (15))."""
+        pairs = {(self.np_baseline, self.nc_baseline)}
+        if self.horizons_mode == "apcha":
+            for n_p in range(self.np_min, self.np_max + 1):
+                lo = max(n_p // 3, min(self.nc_min, n_p // 2))
+                hi = max(n_p // 3, min(self.nc_max, n_p // 2))
+                pairs.update((n_p, n_c) for n_c in range(lo, hi + 1))
+        return sorted(pairs)
 
     def fuzzy_spec(self) -> FuzzySpec:
         """Universes and grid of the fuzzy scheduler."""
@@ -320,6 +332,9 @@ class MpcController:
         self._du_max = c.du_max
         self._u_max = c.u_max
         self._enabled = c.enabled
+        if c.osqp_prebuild:
+            for n_p, n_c in c.horizon_pairs():
+                self.qp.instance(n_p, n_c)
         self.reset()
 
     def reset(self, u_prev: np.ndarray | None = None) -> None:

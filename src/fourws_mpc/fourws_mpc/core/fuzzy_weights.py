@@ -83,7 +83,7 @@ class FuzzySpec:
     e_phi_range_deg: float = 8.0
     grid_y: int = 121
     grid_phi: int = 161
-    out_points: int = 501
+    out_points: int = 201
 
     def input_sets(self) -> tuple[list, list]:
         """Triangles (a, b, c) of e_Y (m) and e_φ (deg)."""
