@@ -1,47 +1,109 @@
 """The whole graph over real topics: plant, MPC, speed PID, allocator and recorder.
 
-- The lockstep graph is the in-process closed loop (``fourws_bringup.core.closed_loop``)
-  distributed over processes: the recorded states equal the in-process ones to 1e-9.
-- On the paper's 60 km/h, μ = 0.5 lane change the controllers rank as in Table 6 on max |eY|
-  and RMSE eY: improved < mpc_4ws < mpc_fws.
+One module-scoped set of lockstep runs of the paper's 60 km/h, μ = 0.5 lane change
+(mpc_fws, mpc_4ws, improved) is shared by the tests below:
+- the controllers rank as in Table 6 on max |eY| and RMSE eY: improved < mpc_4ws < mpc_fws;
+- the graph is the in-process closed loop (``fourws_bringup.core.closed_loop``) distributed
+  over processes: recorded states and commands equal the in-process ones to 1e-9;
+- replaying the recorded /vehicle/state and /reference/trajectory into a fresh mpc_node in
+  lockstep reproduces the recorded /control/mpc_command to 1e-9;
+- ``fourws report`` recomputes metrics.json from the bag alone.
 """
 
 from __future__ import annotations
+
+import json
+import subprocess
 
 import numpy as np
 import pytest
 
 from fourws_bringup.bag import read_run
 from fourws_bringup.core.closed_loop import run_closed_loop
-from fourws_bringup.paper import metrics_from_run
-from fourws_bringup.runner import run_graph
+from fourws_bringup.paper import metrics_from_run, run_and_score
+from fourws_bringup.supervisor import NodeSpec
+from fourws_common.conversions import stamp_to_ns
+from fourws_common.qos import CONTROL_QOS
+from fourws_common.resources import config_dir
+from fourws_msgs.msg import MpcCommand
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
+SCENARIO = "dlc_60_mu05"
+CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved")
 
 
-def _graph_run(tmp_path, scenario: str, controller: str):
-    out = tmp_path / f"{controller}@{scenario}"
-    out.mkdir()
-    outcome = run_graph(scenario, controller, out, progress=False)
-    assert outcome.completed, outcome.reason
-    return read_run(out)
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("graph_runs")
+    out = {}
+    for c in CONTROLLERS:
+        folder = base / f"{c}@{SCENARIO}"
+        metrics = run_and_score(SCENARIO, c, folder, plots=False, progress=False)
+        out[c] = (folder, metrics)
+    return out
 
 
-def test_graph_reproduces_the_in_process_closed_loop(tmp_path):
-    run = _graph_run(tmp_path, "dlc_60_mu05", "mpc_4ws")
-    log = run_closed_loop("dlc_60_mu05", "mpc_4ws")
-    n = min(run.steps, log.steps)
-    assert n > 500 and abs(run.steps - (log.steps + 1)) <= 1
-    for key in ("x", "y", "yaw", "vx", "vy", "yaw_rate"):
-        np.testing.assert_allclose(run.state[key][:n], log.state[key][:n], rtol=0, atol=1e-9,
-                                   err_msg=key)
-    np.testing.assert_allclose(run.mpc_command["delta_front"][:n], log.mpc["delta_front"][:n],
-                               rtol=0, atol=1e-9)
+def test_every_run_completes_and_is_recorded(runs):
+    for c, (folder, m) in runs.items():
+        assert m["completed"], (c, m["reason"])
+        assert m["steps"] > 900 and m["real_time_factor"] > 0
+        assert json.loads((folder / "metrics.json").read_text()) == m
 
 
-def test_controllers_rank_as_in_table_6_over_topics(tmp_path):
-    m = {c: metrics_from_run(_graph_run(tmp_path, "dlc_60_mu05", c))
-         for c in ("mpc_fws", "mpc_4ws", "improved")}
+def test_controllers_rank_as_in_table_6_over_topics(runs):
+    m = {c: runs[c][1] for c in CONTROLLERS}
     for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):
         assert m["improved"][key] < m["mpc_4ws"][key] < m["mpc_fws"][key], (key, m)
     assert m["improved"]["max_abs_lateral_error_m"] < 0.15
+
+
+def test_graph_reproduces_the_in_process_closed_loop(runs):
+    run = read_run(runs["improved"][0])
+    log = run_closed_loop(SCENARIO, "improved")
+    assert run.steps == log.steps + 1
+    n = log.steps
+    for key in ("x", "y", "yaw", "vx", "vy", "yaw_rate"):
+        np.testing.assert_allclose(run.state[key][:n], log.state[key], rtol=0, atol=1e-9,
+                                   err_msg=key)
+    for key in ("delta_front", "delta_rear", "yaw_moment"):
+        np.testing.assert_allclose(run.mpc_command[key], log.mpc[key], rtol=0, atol=1e-9,
+                                   err_msg=key)
+    np.testing.assert_array_equal(run.mpc_diagnostics["np"], log.mpc["np"])
+
+
+def test_replay_into_a_fresh_mpc_reproduces_the_recorded_commands(runs, graph, ros):
+    folder = runs["improved"][0]
+    recorded = read_run(folder)
+    got: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command",
+                                 lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+    preset = config_dir("fourws_bringup") / "controllers" / "improved.yaml"
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)])])
+    graph([NodeSpec("replay_node", "fourws_bringup", "replay_node", parameters={
+        "bag": str(folder / "bag"), "rate": 0.0,
+        "topics": "[/vehicle/state,/reference/trajectory]",
+        "lockstep_topic": "/control/mpc_command", "wait_for_subscribers": True})])
+    n = len(recorded.mpc_command["stamp_ns"])
+    assert ros.spin_until(lambda: len(got) >= n, 240.0), f"{len(got)} of {n} commands"
+    stamps = recorded.mpc_command["stamp_ns"]
+    for key in ("delta_front", "delta_rear", "yaw_moment"):
+        replayed = np.array([getattr(got[int(s)], key) for s in stamps])
+        np.testing.assert_allclose(replayed, recorded.mpc_command[key], rtol=0, atol=1e-9,
+                                   err_msg=key)
+
+
+def test_report_recomputes_metrics_from_the_bag(runs, tmp_path):
+    folder, m = runs["mpc_4ws"]
+    out = tmp_path / "report"
+    subprocess.run(["fourws", "report", str(folder / "bag"), "--out", str(out)], check=True,
+                   capture_output=True)
+    again = json.loads((out / "metrics.json").read_text())
+    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
+                "max_abs_heading_error_deg", "rmse_heading_error_deg", "max_abs_sideslip_deg",
+                "rmse_sideslip_deg", "mpc_solve_ms_p50", "mpc_solve_ms_p99", "steps"):
+        assert again[key] == m[key], key
+    assert (out / "plots").is_dir() and any((out / "plots").glob("*.png"))
+    recomputed = metrics_from_run(read_run(folder))
+    assert recomputed["max_abs_lateral_error_m"] == m["max_abs_lateral_error_m"]
