@@ -1,0 +1,108 @@
+"""Benchmark of the full MPC step (errors, weights, horizons, linearisation, build, solve).
+
+Replays a realistic closed-loop trajectory: the ``improved`` controller is run in the
+in-process closed loop on dlc_60_mu05 (plant core, PID, allocator) and its per-step plant
+outputs are recorded; then, for each forced horizon pair, a fresh ``improved`` controller
+(fuzzy weights, DYC) with APCHA switched off and the pair forced as its fixed horizons steps
+through the recorded states (≥ 2000 steps, the trajectory repeated with the controller reset
+at each lap). Each ``step()`` is timed with ``time.perf_counter``; median and p99 are printed
+and written as JSON to argv[1] (default bench/results_mpc.json).
+
+Usage: python bench/bench_mpc.py [out.json] [--steps N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+for pkg in ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", "fourws_bringup"):
+    p = str(ROOT / "src" / pkg)
+    if p not in sys.path:
+        sys.path.insert(0, p)
+
+from fourws_bringup.core.closed_loop import load_mpc_config, run_closed_loop  # noqa: E402
+from fourws_mpc.core.controller import MeasIdx, MpcController  # noqa: E402
+
+PAIRS = ((12, 6), (30, 10))
+SCENARIO = "dlc_60_mu05"
+CONTROLLER = "improved"
+
+
+def record_trajectory() -> tuple[np.ndarray, np.ndarray, object]:
+    """Per-step measured states (n, 6) in MeasIdx order and μ (n,) of a closed-loop run."""
+    log = run_closed_loop(SCENARIO, CONTROLLER)
+    s = log.state
+    states = np.zeros((log.steps, len(MeasIdx)))
+    for idx, key in ((MeasIdx.X, "x"), (MeasIdx.Y, "y"), (MeasIdx.YAW, "yaw"),
+                     (MeasIdx.VX, "vx"), (MeasIdx.VY, "vy"), (MeasIdx.YAW_RATE, "yaw_rate")):
+        states[:, idx] = s[key]
+    mu = s["mu"].mean(axis=1)
+    return states, mu, log.reference
+
+
+def bench_pair(n_p: int, n_c: int, states: np.ndarray, mu: np.ndarray, ref, steps: int
+               ) -> dict:
+    cfg = load_mpc_config(CONTROLLER, {"horizons_mode": "fixed", "np_baseline": n_p,
+                                       "nc_baseline": n_c})
+    ctrl = MpcController(cfg)
+    n = len(states)
+    times = np.empty(steps)
+    fallbacks = 0
+    iters = np.empty(steps)
+    for k in range(steps):
+        i = k % n
+        if i == 0:
+            ctrl.reset()
+        t0 = time.perf_counter()
+        res = ctrl.step(0.01 * i, states[i], ref, mu=float(mu[i]))
+        times[k] = (time.perf_counter() - t0) * 1e3
+        fallbacks += res.fallback
+        iters[k] = res.iterations
+    return {
+        "np": n_p, "nc": n_c, "steps": steps,
+        "median_ms": float(np.median(times)), "p99_ms": float(np.percentile(times, 99)),
+        "max_ms": float(times.max()), "mean_ms": float(times.mean()),
+        "fallbacks": int(fallbacks), "osqp_iterations_median": float(np.median(iters)),
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", nargs="?", default=str(ROOT / "bench" / "results_mpc.json"))
+    ap.add_argument("--steps", type=int, default=3000)
+    args = ap.parse_args()
+    if args.steps < 2000:
+        ap.error("--steps must be at least 2000")
+    states, mu, ref = record_trajectory()
+    results = {
+        "benchmark": "mpc_step", "scenario": SCENARIO, "controller": CONTROLLER,
+        "trajectory_steps": int(len(states)), "python": platform.python_version(),
+        "machine": platform.machine(), "pairs": [],
+    }
+    for n_p, n_c in PAIRS:
+        r = bench_pair(n_p, n_c, states, mu, ref, args.steps)
+        results["pairs"].append(r)
+        print(f"MPC step Np={n_p:2d} Nc={n_c:2d}: median {r['median_ms']:.3f} ms, "
+              f"p99 {r['p99_ms']:.3f} ms, max {r['max_ms']:.3f} ms over {r['steps']} steps "
+              f"(fallbacks {r['fallbacks']}, OSQP iterations median "
+              f"{r['osqp_iterations_median']:.0f})")
+    p30 = next(r for r in results["pairs"] if (r["np"], r["nc"]) == (30, 10))
+    results["target_p99_ms_at_30_10"] = 2.0
+    results["meets_target"] = bool(p30["p99_ms"] <= 2.0)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+    print(f"written {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

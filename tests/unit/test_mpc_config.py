@@ -1,0 +1,102 @@
+"""MpcConfig: mpc.yaml mirrors the defaults, presets load, bad values raise naming the field;
+the MPC cores import nothing from ROS."""
+
+import ast
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from fourws_common.params import from_mapping, load_ros_params_yaml
+from fourws_common.resources import config_dir
+from fourws_mpc.core.controller import MpcConfig
+
+ROOT = Path(__file__).resolve().parents[2]
+MPC_YAML = config_dir("fourws_mpc") / "mpc.yaml"
+PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
+
+
+def _preset(name):
+    values = load_ros_params_yaml(str(MPC_YAML), "mpc_node")
+    path = config_dir("fourws_bringup") / "controllers" / f"{name}.yaml"
+    values.update(load_ros_params_yaml(str(path), "mpc_node"))
+    return from_mapping(MpcConfig, values), load_ros_params_yaml(str(path), "allocator_node")
+
+
+def test_mpc_yaml_holds_every_default():
+    values = load_ros_params_yaml(str(MPC_YAML), "mpc_node")
+    names = {f.name for f in dataclasses.fields(MpcConfig)}
+    assert set(values) == names
+    assert from_mapping(MpcConfig, values) == MpcConfig()
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_presets_load(name):
+    cfg, alloc = _preset(name)
+    assert cfg.controller == name
+    expected = {
+        "mpc_fws": (False, False, "fixed", "fixed", "equal"),
+        "mpc_4ws": (True, False, "fixed", "fixed", "equal"),
+        "improved": (True, True, "fuzzy", "apcha", "optimal"),
+        "ampc_4ws": (True, False, "fuzzy", "apcha", "equal"),
+        "ampc_4ws_dyc": (True, True, "fuzzy", "apcha", "rule"),
+    }[name]
+    assert (cfg.use_rear_steer, cfg.use_dyc, cfg.weights_mode, cfg.horizons_mode,
+            alloc["method"]) == expected
+
+
+def test_presets_share_one_cost_scaling_and_constraints():
+    shared = [f.name for f in dataclasses.fields(MpcConfig)
+              if f.name not in ("controller", "use_rear_steer", "use_dyc", "weights_mode",
+                                "horizons_mode")]
+    cfgs = [_preset(n)[0] for n in PRESETS]
+    for name in shared:
+        assert len({getattr(c, name) for c in cfgs}) == 1, name
+
+
+@pytest.mark.parametrize("key,value", [
+    ("rho", -1.0), ("scale_y_m", 0.0), ("weights_mode", "neural"), ("np_baseline", 2.5),
+    ("use_dyc", "yes"), ("max_dsteer_front_deg", 0.0), ("apcha_lambda", 1.0),
+    ("apcha_nc_base", "x"), ("osqp_max_iter", 1),
+])
+def test_bad_parameter_raises_naming_it(key, value):
+    with pytest.raises(ValueError, match=key):
+        MpcConfig.from_mapping({key: value})
+
+
+@pytest.mark.parametrize("values,names", [
+    ({"np_min": 20, "np_max": 12}, "np_min, np_max"),
+    ({"nc_min": 8, "nc_max": 4}, "nc_min, nc_max"),
+    ({"np_baseline": 5, "nc_baseline": 6, "horizons_mode": "fixed"}, "nc_baseline"),
+    ({"np_baseline": 40}, "np_baseline"),
+])
+def test_cross_field_rules_name_the_fields(values, names):
+    with pytest.raises(ValueError, match=names):
+        MpcConfig.from_mapping(values)
+
+
+def test_unknown_key_is_rejected():
+    with pytest.raises(ValueError, match="bogus"):
+        MpcConfig.from_mapping({"bogus": 1})
+
+
+FORBIDDEN = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "nav_msgs",
+             "geometry_msgs", "fourws_msgs", "rosgraph_msgs", "time")
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "src/fourws_mpc/fourws_mpc/core").glob("*.py"))
+                         + [ROOT / "src/fourws_bringup/fourws_bringup/core/closed_loop.py",
+                            ROOT / "src/fourws_bringup/fourws_bringup/core/metrics.py"],
+                         ids=lambda p: p.name)
+def test_cores_import_nothing_from_ros(path):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            mods = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mods = [node.module or ""]
+        else:
+            continue
+        for m in mods:
+            top = m.split(".")[0]
+            assert top not in FORBIDDEN and not top.endswith("_msgs"), f"{path.name}: {m}"

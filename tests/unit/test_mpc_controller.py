@@ -1,0 +1,163 @@
+"""MPC controller: closed loop on the nonlinear eq. (1) model, fallback, input checks."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fourws_mpc.core.controller import MeasIdx, MpcConfig, MpcController, VehicleSample
+from fourws_mpc.core.model import ModelParams, StateIdx, dynamics
+from fourws_mpc.core.qp import QpSolution
+from fourws_mpc.core.reference import Reference
+
+V = 15.0
+
+
+def _straight(n=3001, length=300.0, v=V):
+    x = np.linspace(0, length, n)
+    return Reference.from_arrays(x, np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, v))
+
+
+def _cfg(**kw):
+    base = dict(weights_mode="fixed", horizons_mode="fixed", use_dyc=False,
+                osqp_prebuild=False)
+    base.update(kw)
+    return MpcConfig(**base)
+
+
+def _simulate(ctrl, ref, y0=0.3, steps=300):
+    """Closed loop on the nonlinear model of eq. (1) at constant speed (the PID's job)."""
+    p = ctrl.model
+    z = np.array([0.0, V, 0.0, 0.0, y0, 0.0])
+    out = []
+    for k in range(steps):
+        st = VehicleSample(x=z[StateIdx.X], y=z[StateIdx.Y], yaw=z[StateIdx.PHI], vx=V,
+                           vy=z[StateIdx.VY], yaw_rate=z[StateIdx.R])
+        r = ctrl.step(0.01 * k, st, ref)
+        out.append(r)
+        u = np.array([r.delta_front, r.delta_rear, r.yaw_moment])
+        for _ in range(10):
+            z = z + 0.001 * dynamics(z, u, p)
+        z[StateIdx.VX] = V
+    return z, out
+
+
+@pytest.mark.parametrize("rear,dyc", [(False, False), (True, False), (True, True)])
+def test_converges_to_a_straight_path_on_the_nonlinear_model(rear, dyc):
+    ctrl = MpcController(_cfg(use_rear_steer=rear, use_dyc=dyc, scale_y_m=0.02,
+                              scale_phi_deg=0.3, np_baseline=20, nc_baseline=6))
+    z, out = _simulate(ctrl, _straight(), y0=0.3, steps=400)
+    assert abs(z[StateIdx.Y]) < 0.02
+    assert abs(z[StateIdx.PHI]) < math.radians(0.5)
+    assert not any(r.fallback for r in out)
+    for r in out:
+        vals = [r.delta_front, r.delta_rear, r.yaw_moment, r.slack, r.e_s]
+        assert all(math.isfinite(v) for v in vals)
+        if not rear:
+            assert r.delta_rear == 0.0
+        if not dyc:
+            assert r.yaw_moment == 0.0
+        assert abs(r.delta_front) <= math.radians(30) + 1e-12
+    d = np.diff([r.delta_front for r in out])
+    assert np.all(np.abs(d) <= math.radians(0.8) + 1e-9)
+
+
+def test_fixed_mode_keeps_horizons_and_weights():
+    ctrl = MpcController(_cfg())
+    _, out = _simulate(ctrl, _straight(), y0=0.5, steps=30)
+    assert {(r.np, r.nc) for r in out} == {(12, 6)}
+    assert {(r.q_y, r.q_phi, r.r_ddelta, r.r_dmz) for r in out} == {(10.0, 1.0, 1.0, 1.0)}
+    assert out[0].lateral_error == pytest.approx(0.5, abs=1e-9)
+
+
+def test_fuzzy_apcha_mode_reports_adaptive_parameters():
+    ctrl = MpcController(_cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True))
+    _, out = _simulate(ctrl, _straight(), y0=0.4, steps=20)
+    r0 = out[0]
+    assert r0.np > 12                    # e_s = 0.8 > 2 ε1: N_p grows towards 28
+    assert 0 < r0.q_y < 8000 and 0 < r0.r_ddelta < 80000
+    assert r0.e_s == pytest.approx(0.4 / 0.5, abs=1e-6)
+
+
+def test_accepts_array_state_and_rejects_non_finite():
+    ctrl = MpcController(_cfg())
+    ref = _straight()
+    s = np.zeros(len(MeasIdx))
+    s[MeasIdx.VX] = V
+    s[MeasIdx.Y] = 0.1
+    r = ctrl.step(0.0, s, ref)
+    assert r.lateral_error == pytest.approx(0.1)
+    for idx in MeasIdx:
+        bad = s.copy()
+        bad[idx] = math.nan
+        with pytest.raises(ValueError, match=idx.name.lower()):
+            ctrl.step(0.01, bad, ref)
+    with pytest.raises(ValueError):
+        ctrl.step(0.01, s[:4], ref)
+
+
+def _fail(*_args, **_kwargs):
+    z = np.zeros((6, 3))
+    return QpSolution(False, "primal infeasible", 17, z, z, 0.0, z)
+
+
+def test_failed_solve_applies_the_previous_plan_shifted_then_holds(monkeypatch):
+    ctrl = MpcController(_cfg())
+    ref = _straight()
+    s = VehicleSample(x=0.0, y=0.4, yaw=0.0, vx=V, vy=0.0, yaw_rate=0.0)
+    r = ctrl.step(0.0, s, ref)
+    assert not r.fallback
+    plan = ctrl.plan_u.copy()
+    assert plan.shape == (6, 3)
+    monkeypatch.setattr(ctrl.qp, "solve", _fail)
+    got = []
+    for k in range(1, 9):
+        r = ctrl.step(0.01 * k, s, ref)
+        assert r.fallback and r.solver_status == "primal infeasible"
+        got.append([r.delta_front, r.delta_rear, r.yaw_moment])
+        assert all(math.isfinite(v) for v in got[-1])
+    got = np.array(got)
+    np.testing.assert_allclose(got[:5], plan[1:6])          # u(k+1|k), ..., u(k+5|k)
+    np.testing.assert_allclose(got[5:], np.repeat(plan[5:6], 3, axis=0))   # then held
+
+
+def test_failed_first_solve_holds_the_initial_command(monkeypatch):
+    ctrl = MpcController(_cfg())
+    monkeypatch.setattr(ctrl.qp, "solve", _fail)
+    s = VehicleSample(x=0.0, y=0.4, yaw=0.0, vx=V, vy=0.0, yaw_rate=0.0)
+    r = ctrl.step(0.0, s, _straight())
+    assert r.fallback
+    assert (r.delta_front, r.delta_rear, r.yaw_moment) == (0.0, 0.0, 0.0)
+
+
+def test_infeasible_hard_bounds_fall_back_without_nan():
+    ctrl = MpcController(_cfg(np_baseline=12))
+    ref = _straight()
+    ok = ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0)
+    assert not ok.fallback
+    # yaw rate far above 0.85 μ g / vx = 0.11 rad/s at μ = 0.2, unreachable in one step
+    r = ctrl.step(0.01, VehicleSample(0.15, 0.05, 0.0, V, 0.0, 0.6), ref, mu=0.2)
+    assert r.fallback and "infeasible" in r.solver_status
+    assert all(math.isfinite(v) for v in (r.delta_front, r.delta_rear, r.yaw_moment))
+
+
+def test_reset_forgets_the_past():
+    ctrl = MpcController(_cfg(weights_mode="fuzzy", horizons_mode="apcha"))
+    _simulate(ctrl, _straight(), y0=0.6, steps=10)
+    assert ctrl.n_p != 12 or ctrl.plan_u is not None
+    ctrl.reset()
+    assert (ctrl.n_p, ctrl.n_c) == (12, 6)
+    assert ctrl.plan_u is None and np.all(ctrl.u_prev == 0.0) and ctrl.e_s_prev is None
+
+
+def test_prebuild_creates_every_reachable_instance():
+    cfg = MpcConfig(osqp_prebuild=True)
+    ctrl = MpcController(cfg)
+    assert set(ctrl.qp.instances) == set(cfg.horizon_pairs())
+    assert (12, 6) in ctrl.qp.instances and (30, 10) in ctrl.qp.instances
+    assert all(n_p // 3 <= n_c <= max(n_p // 3, n_p // 2) for n_p, n_c in ctrl.qp.instances)
+
+
+def test_model_params_follow_the_config():
+    p = MpcConfig(cornering_stiffness_front_npr=25000.0).model_params()
+    assert isinstance(p, ModelParams) and p.c_cf == 25000.0
