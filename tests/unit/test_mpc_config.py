@@ -100,3 +100,14 @@ def test_cores_import_nothing_from_ros(path):
         for m in mods:
             top = m.split(".")[0]
             assert top not in FORBIDDEN and not top.endswith("_msgs"), f"{path.name}: {m}"
+
+
+def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
+    from fourws_mpc.core.controller import equal_effect_scaling
+
+    cfg = MpcConfig.from_mapping(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    derived = equal_effect_scaling(cfg, 60.0 / 3.6)
+    for key, value in derived.items():
+        assert getattr(cfg, key) == pytest.approx(value, rel=0.02), key
+    assert cfg.scale_dsteer_front_deg == cfg.max_dsteer_front_deg
+    assert cfg.scale_dmz_nm == cfg.max_dyaw_moment_nm

@@ -135,10 +135,23 @@ def test_infeasible_hard_bounds_fall_back_without_nan():
     ref = _straight()
     ok = ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0)
     assert not ok.fallback
-    # yaw rate far above 0.85 μ g / vx = 0.11 rad/s at μ = 0.2, unreachable in one step
-    r = ctrl.step(0.01, VehicleSample(0.15, 0.05, 0.0, V, 0.0, 0.6), ref, mu=0.2)
+    plan = ctrl.plan_u.copy()
+    # 20° of front steer already applied: the yaw rate rises by ~0.3 rad/s per step and the
+    # 0.8°/step rate limit cannot stop it below 0.85 μ g / vx = 0.11 rad/s (μ = 0.2)
+    ctrl.u_prev = np.array([math.radians(20.0), 0.0, 0.0])
+    r = ctrl.step(0.01, VehicleSample(0.15, 0.05, 0.0, V, 0.0, 0.1), ref, mu=0.2)
     assert r.fallback and "infeasible" in r.solver_status
+    assert r.delta_front == pytest.approx(plan[1, 0])      # the previous plan, shifted
     assert all(math.isfinite(v) for v in (r.delta_front, r.delta_rear, r.yaw_moment))
+
+
+def test_hard_bounds_relax_to_the_current_state_when_already_beyond():
+    """|r| above its bound: the bound becomes "no worse than now", the QP stays feasible."""
+    ctrl = MpcController(_cfg(np_baseline=12))
+    ref = _straight()
+    r = ctrl.step(0.0, VehicleSample(0.0, 0.0, 0.0, V, 0.0, 0.3), ref, mu=0.2)
+    assert not r.fallback and r.solver_status == "solved"
+    assert r.delta_front < 0.0                               # steers against the yaw rate
 
 
 def test_reset_forgets_the_past():

@@ -2,13 +2,15 @@
 
 Same sequencing as the lockstep graph (design.md) at every step k::
 
-    outputs(k) ──► mpc.step(t_k, outputs(k))                 → δf, δr, Mz      (mpc_node)
-               ──► pid.step(v_ref(nearest point), vx, T)     → T_total         (speed_pid_node)
+    outputs(k) ──► mpc.step(t_k, outputs(k), mu=mean μ)      → δf, δr, Mz      (mpc_node)
+               ──► pid.step(v_ref, vx, T, a_ref)             → T_total         (speed_pid_node)
                ──► allocate(method, T_total, Mz, fz, fy, μ)  → 4 wheel torques (allocator_node)
                ──► plant.step(δf, δr, torques, T)            → outputs(k+1)    (plant_node)
 
 until the scenario ends (its ``check_end``: end X, duration, end of path, or an abort) or
-``max_steps``. Configuration comes from the same YAML files as the nodes:
+``max_steps``. As in speed_pid_node, v_ref is the reference speed at the path sample nearest
+to the car (``fourws_common.path_lookup.PathIndex``) and a_ref = v dv/ds there.
+Configuration comes from the same YAML files as the nodes:
 ``fourws_mpc/config/mpc.yaml`` with the controller preset
 ``fourws_bringup/config/controllers/<name>.yaml`` merged over it (``mpc_node`` and
 ``allocator_node`` sections), ``fourws_torque_alloc/config/{speed_pid,allocator}.yaml`` and
@@ -30,6 +32,7 @@ import numpy as np
 
 from fourws_bringup.core.metrics import run_metrics
 from fourws_common.params import from_mapping, load_ros_params_yaml
+from fourws_common.path_lookup import PathIndex
 from fourws_common.resources import config_dir
 from fourws_mpc.core.controller import MpcConfig, MpcController
 from fourws_mpc.core.reference import Reference
@@ -155,6 +158,11 @@ def run_closed_loop(
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
     ref = reference_of(scenario, mpc_cfg)
+    path = scenario.path
+    speed_index = PathIndex(path.x, path.y)
+    speed = np.asarray(path.speed, dtype=float)
+    dv_ds = np.diff(speed) / np.maximum(np.hypot(np.diff(path.x), np.diff(path.y)), 1e-9)
+    accel_ref = speed * np.append(dv_ds, dv_ds[-1])
 
     st: dict[str, list] = {k: [] for k in STATE_FIELDS + WHEEL_FIELDS}
     mp: dict[str, list] = {k: [] for k in MPC_FIELDS}
@@ -167,7 +175,8 @@ def run_closed_loop(
         t0 = clock() if clock is not None else 0.0
         res = mpc.step(out.t_s, out, ref, mu=float(np.mean(out.mu)))
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
-        drive = pid.step(res.ref_speed, out.vx, dt)
+        i = speed_index.nearest(out.x, out.y)
+        drive = pid.step(float(speed[i]), out.vx, dt, float(accel_ref[i]))
         a = alloc.allocate(drive.torque_nm, res.yaw_moment, out.fz, out.fy, out.mu)
         for name in STATE_FIELDS + WHEEL_FIELDS:
             st[name].append(np.array(getattr(out, name), dtype=float))

@@ -12,6 +12,10 @@ One call of :meth:`MpcController.step` at time k:
    model of eq. (4) linearised at (ζ0, u(k−1)) (``model``);
 5. reference outputs (φ_ref, Y_ref) at s + vx T i, i = 1..N_p;
 6. the QP of eq. (16)-(20) (``qp``), warm-started from the previous plan shifted by one;
+   hard bounds |vy| ≤ vx tan β_max and |r| ≤ factor μ g / vx on predicted steps
+   i ≥ ``state_bounds_from_step``, each relaxed to the current |vy| or |r| when the car is
+   already beyond it ("no worse than now": a bound the state already violates cannot be met
+   within a few steps and would only make the QP infeasible);
 7. u(k) = u(k−1) + Δu*(k), eq. (22).
 
 Cost scaling (one for every controller, see docs/mpc.md): the paper's weights multiply
@@ -107,13 +111,13 @@ class MpcConfig:
     fuzzy_out_points: int = param(201, "samples of the output universe [0, 1]", lo=11,
                                   hi=10001)
     # cost scaling (one for all controllers)
-    scale_y_m: float = param(0.5, "characteristic lateral error s_Y", lo=1e-6, hi=100.0,
+    scale_y_m: float = param(0.0059, "characteristic lateral error s_Y", lo=1e-6, hi=100.0,
                              unit="m")
-    scale_phi_deg: float = param(8.0, "characteristic heading error s_φ", lo=1e-6, hi=180.0,
+    scale_phi_deg: float = param(0.30, "characteristic heading error s_φ", lo=1e-6, hi=180.0,
                                  unit="deg")
     scale_dsteer_front_deg: float = param(0.8, "characteristic front-steer increment s_Δδf",
                                           lo=1e-6, hi=90.0, unit="deg")
-    scale_dsteer_rear_deg: float = param(0.6, "characteristic rear-steer increment s_Δδr",
+    scale_dsteer_rear_deg: float = param(1.04, "characteristic rear-steer increment s_Δδr",
                                          lo=1e-6, hi=90.0, unit="deg")
     scale_dmz_nm: float = param(300.0, "characteristic yaw-moment increment s_ΔMz", lo=1e-6,
                                 hi=1e6, unit="N*m")
@@ -147,6 +151,9 @@ class MpcConfig:
     max_yaw_moment_nm: float = param(1500.0, "|Mz| bound", lo=0.0, hi=1e6, unit="N*m")
     max_dyaw_moment_nm: float = param(300.0, "|ΔMz| per step", lo=1e-6, hi=1e6, unit="N*m")
     state_bounds: bool = param(True, "impose the hard sideslip and yaw-rate bounds")
+    state_bounds_from_step: int = param(3, "first prediction step i with the hard bounds "
+                                        "(earlier steps are fixed by the current state)",
+                                        lo=1, hi=200)
     max_sideslip_deg: float = param(6.0, "hard |β| bound, as |vy| ≤ vx tan β_max", lo=0.01,
                                     hi=90.0, unit="deg")
     yaw_rate_mu_factor: float = param(0.85, "hard |r| ≤ factor μ g / vx", lo=0.01, hi=10.0)
@@ -180,6 +187,8 @@ class MpcConfig:
     osqp_eps_rel: float = param(1e-4, "OSQP relative tolerance", lo=1e-10, hi=1.0)
     osqp_max_iter: int = param(4000, "OSQP iteration limit", lo=10, hi=1000000)
     osqp_polishing: bool = param(False, "OSQP solution polishing")
+    osqp_check_termination: int = param(5, "OSQP checks convergence every this many "
+                                        "iterations", lo=1, hi=1000)
     osqp_accept_inaccurate: bool = param(False, "trust OSQP status 'solved inaccurate'")
     osqp_prebuild: bool = param(True, "set up the OSQP instance of every reachable (N_p, N_c) "
                                 "at start-up (no set-up cost inside the control loop)")
@@ -275,6 +284,33 @@ class MpcConfig:
         return q, r
 
 
+def equal_effect_scaling(cfg: MpcConfig, speed_mps: float = 60.0 / 3.6
+                         ) -> dict[str, float]:
+    """The cost scaling's characteristic sizes derived from the prediction model.
+
+    At straight driving at ``speed_mps`` over the baseline horizon N_p (eq. 6): s_Y and s_φ
+    are the changes of Y and φ at step N_p after one maximal front-steer increment Δδf,max
+    (held), s_Δδr the rear-steer increment with the same lateral effect. Returns
+    ``scale_y_m``, ``scale_phi_deg``, ``scale_dsteer_rear_deg`` (docs/mpc.md).
+    """
+    from fourws_mpc.core.model import discretise as _disc
+    from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
+
+    zeta = np.zeros(N_STATE)
+    zeta[StateIdx.VX] = speed_mps
+    Ak, Bk, dk = _disc(zeta, np.zeros(N_INPUT), cfg.model_params(), cfg.dt_s)
+    Aa, Ba, _ = augment(Ak, Bk, dk)
+    n_p = cfg.np_baseline
+    _, theta, _ = prediction_matrices(Aa, Ba, output_matrix(), n_p, 1)
+    last = theta.reshape(n_p, -1, N_INPUT)[-1]         # rows φ, Y, vy, r at step N_p
+    dmax = cfg.du_max
+    y_f = abs(last[1, InputIdx.DF]) * dmax[InputIdx.DF]
+    phi_f = abs(last[0, InputIdx.DF]) * dmax[InputIdx.DF]
+    dr = y_f / abs(last[1, InputIdx.DR])
+    return {"scale_y_m": float(y_f), "scale_phi_deg": math.degrees(phi_f),
+            "scale_dsteer_rear_deg": math.degrees(dr)}
+
+
 @dataclass(frozen=True, slots=True)
 class MpcResult:
     """Command (SI) and diagnostics of one MPC step."""
@@ -328,7 +364,8 @@ class MpcController:
         self.fuzzy = FuzzyWeights(c.fuzzy_spec()) if c.weights_mode == "fuzzy" else None
         self.qp = MpcQp(QpSettings(eps_abs=c.osqp_eps_abs, eps_rel=c.osqp_eps_rel,
                                    max_iter=c.osqp_max_iter, polishing=c.osqp_polishing,
-                                   accept_inaccurate=c.osqp_accept_inaccurate))
+                                   accept_inaccurate=c.osqp_accept_inaccurate,
+                                   check_termination=c.osqp_check_termination))
         self._du_max = c.du_max
         self._u_max = c.u_max
         self._enabled = c.enabled
@@ -349,7 +386,7 @@ class MpcController:
         self.n_c = self.cfg.nc_baseline
         self.e_s_prev: float | None = None
         self.ref_hint: int | None = None
-        self._ref_id: int | None = None
+        self._ref: Reference | None = None
 
     def _weights(self, e_y: float, e_phi: float) -> tuple[float, float, float, float]:
         c = self.cfg
@@ -371,9 +408,9 @@ class MpcController:
         x, y, yaw, vx, vy, r = _read_state(state)
         if mu is not None and not math.isfinite(mu):
             raise ValueError(f"mu: not finite ({mu!r})")
-        if id(ref) != self._ref_id:
+        if ref is not self._ref:
             self.ref_hint = None
-            self._ref_id = id(ref)
+            self._ref = ref
         err = ref.errors(x, y, yaw, self.ref_hint)
         near = err.near
         self.ref_hint = near.index
@@ -406,10 +443,10 @@ class MpcController:
         mu_b = c.mu_default if mu is None else max(float(mu), 0.01)
         bounds = QpBounds(
             du_max=self._du_max, u_max=self._u_max, enabled=self._enabled,
-            vy_max=vxb * math.tan(math.radians(c.max_sideslip_deg)),
-            r_max=c.yaw_rate_mu_factor * mu_b * G / vxb,
+            vy_max=max(vxb * math.tan(math.radians(c.max_sideslip_deg)), abs(vy)),
+            r_max=max(c.yaw_rate_mu_factor * mu_b * G / vxb, abs(r)),
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
-            state_bounds=c.state_bounds)
+            state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = c.effective_weights(q_phi, q_y, r_dd, r_dmz)
         sol = self.qp.solve(Ak, Bk, dk, zeta, self.u_prev, ref_out, n_p, n_c, q_eff, r_eff,
                             c.rho, bounds, warm_du_scaled=self._warm(n_c))
@@ -450,9 +487,7 @@ class MpcController:
         """Next input of the stored plan (shifted by one step), else hold the last command."""
         if self.plan_u is not None and self.plan_pos + 1 < len(self.plan_u):
             self.plan_pos += 1
-            u = self.plan_u[self.plan_pos].copy()
-            # the rest of the plan keeps its increments
-            return u
+            return self.plan_u[self.plan_pos].copy()
         self.plan_u = None
         self.plan_du_scaled = None
         return self.u_prev.copy()

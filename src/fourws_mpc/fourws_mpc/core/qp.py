@@ -30,7 +30,8 @@ Constraints, eq. (20) and section 3.1.5 (rows of the OSQP matrix, in this order)
     −1 ≤ Δũ_j ≤ 1                         (0 ≤ Δũ ≤ 0 for a disabled input: δr or Mz ≡ 0)
     0 ≤ ε
     u_min − u(k−1) ≤ Σ_{l≤j} D Δũ_l ≤ u_max − u(k−1)
-    |vy_i| ≤ vy_max,  |r_i| ≤ r_max       hard (sideslip β ≈ vy/vx and yaw-rate bounds)
+    |vy_i| ≤ vy_max,  |r_i| ≤ r_max       hard (sideslip β ≈ vy/vx and yaw-rate bounds),
+                                          for i ≥ ``state_bounds_from_step``
     |φ_i − φ_ref,i| ≤ b_φ (1 + ε),  |Y_i − Y_ref,i| ≤ b_Y (1 + ε)     soft, eq. (20)
 
 Disabled inputs keep their columns and are pinned by equal bounds, so every controller shares
@@ -122,6 +123,7 @@ class QpSettings:
     max_iter: int = 4000
     polishing: bool = False
     accept_inaccurate: bool = False
+    check_termination: int = 5
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,7 @@ class QpBounds:
     band_phi: float              # rad, soft
     band_y: float                # m, soft
     state_bounds: bool = True
+    state_bounds_from_step: int = 1   # first prediction step i (1-based) with the hard bounds
 
 
 @dataclass
@@ -174,9 +177,38 @@ class _Instance:
             P, np.zeros(nz), A, -np.ones(self.m), np.ones(self.m),
             eps_abs=settings.eps_abs, eps_rel=settings.eps_rel, max_iter=settings.max_iter,
             polishing=settings.polishing, warm_starting=True, verbose=False,
+            check_termination=settings.check_termination,
         )
         self.last_x: np.ndarray | None = None
         self.uses = 0
+        # constant parts of the dense constraint matrix (rows as in _a_mask)
+        ncol = nu * n_c
+        self.ncol = ncol
+        self.p_gather = (self.p_rows[:-1], self.p_cols[:-1])
+        self.cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(nu))
+        self.A = np.zeros((self.m, ncol + 1))
+        self.A[:ncol, :ncol] = np.eye(ncol)
+        self.A[ncol, ncol] = 1.0
+        self.r_ub = slice(ncol + 1, 2 * ncol + 1)
+        o = 2 * ncol + 1
+        self.r_hard = slice(o, o + 2 * n_p)
+        self.r_soft_hi = slice(o + 2 * n_p, o + 4 * n_p)
+        self.r_soft_lo = slice(o + 4 * n_p, o + 6 * n_p)
+        self.inf2 = np.full(2 * n_p, _INF)
+        self._tiled_key: tuple | None = None
+        self._tiled: tuple[np.ndarray, ...] = ()
+
+    def tiled(self, b: QpBounds) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(D, enabled, u_max, band) repeated over the horizon; cached while unchanged."""
+        key = (b.du_max.tobytes(), b.u_max.tobytes(), b.enabled.tobytes(), b.band_phi,
+               b.band_y)
+        if key != self._tiled_key:
+            self._tiled = (np.tile(b.du_max, self.n_c), np.tile(b.enabled.astype(float),
+                                                                 self.n_c),
+                           np.tile(b.u_max, self.n_c),
+                           np.tile([b.band_phi, b.band_y], self.n_p))
+            self._tiled_key = key
+        return self._tiled  # type: ignore[return-value]
 
     def _a_mask(self) -> np.ndarray:
         n_p, n_c, nu = self.n_p, self.n_c, N_INPUT
@@ -239,54 +271,49 @@ class MpcQp:
         optional primal warm start in units of Δu_max.
         """
         nu = N_INPUT
+        inst = self.instance(n_p, n_c)
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
         psi, theta, gamma = prediction_matrices(Aa, Ba, self._C, n_p, n_c)
         free = (psi @ xi + gamma @ da).reshape(n_p, N_OUT)
-        D = np.tile(bounds.du_max, n_c)
+        D, en, u_max_t, band = inst.tiled(bounds)
         th = (theta * D[None, :]).reshape(n_p, N_OUT, nu * n_c)
         th_out = th[:, :2, :].reshape(2 * n_p, -1)       # φ, Y rows
         th_hard = th[:, 2:, :].reshape(2 * n_p, -1)      # vy, r rows
         e_free = (free[:, :2] - ref).reshape(-1)
 
-        w = np.tile(q_eff, n_p)
-        r_s = np.tile(r_eff, n_c) * D * D
+        w = np.repeat(q_eff[None, :], n_p, axis=0).reshape(-1)
+        r_s = np.repeat(r_eff[None, :], n_c, axis=0).reshape(-1) * D * D
         H = 2.0 * (th_out.T @ (w[:, None] * th_out))
         H[np.diag_indices_from(H)] += 2.0 * r_s
         qvec = np.concatenate([2.0 * th_out.T @ (w * e_free), [0.0]])
 
-        inst = self.instance(n_p, n_c)
-        Px = np.concatenate([H[inst.p_rows[:-1], inst.p_cols[:-1]], [2.0 * rho]])
-        # dense A in the row order of _Instance._a_mask
-        ncol = nu * n_c
-        band = np.tile([bounds.band_phi, bounds.band_y], n_p)
-        cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(nu)) * D[None, :]
-        A = np.zeros((inst.m, ncol + 1))
-        A[:ncol, :ncol] = np.eye(ncol)
-        A[ncol, ncol] = 1.0
-        A[ncol + 1:2 * ncol + 1, :ncol] = cum
-        o = 2 * ncol + 1
-        A[o:o + 2 * n_p, :ncol] = th_hard
-        o2 = o + 2 * n_p
-        A[o2:o2 + 2 * n_p, :ncol] = th_out
-        A[o2:o2 + 2 * n_p, ncol] = -band
-        o3 = o2 + 2 * n_p
-        A[o3:o3 + 2 * n_p, :ncol] = th_out
-        A[o3:o3 + 2 * n_p, ncol] = band
+        Px = np.empty(len(inst.p_rows))
+        Px[:-1] = H[inst.p_gather]
+        Px[-1] = 2.0 * rho
+        A = inst.A
+        ncol = inst.ncol
+        A[inst.r_ub, :ncol] = inst.cum * D[None, :]
+        A[inst.r_hard, :ncol] = th_hard
+        A[inst.r_soft_hi, :ncol] = th_out
+        A[inst.r_soft_hi, ncol] = -band
+        A[inst.r_soft_lo, :ncol] = th_out
+        A[inst.r_soft_lo, ncol] = band
         Ax = A[inst.a_rows, inst.a_cols]
 
-        en = np.tile(bounds.enabled.astype(float), n_c)
-        u_prev_t = np.tile(u_prev, n_c)
-        u_max_t = np.tile(bounds.u_max, n_c)
+        u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
         hard_free = free[:, 2:].reshape(-1)
-        hard_lim = np.tile([bounds.vy_max, bounds.r_max], n_p)
-        if not bounds.state_bounds:
-            hard_lim = np.full(2 * n_p, _INF)
+        if bounds.state_bounds:
+            hard_lim = np.tile([bounds.vy_max, bounds.r_max], n_p)
+            if bounds.state_bounds_from_step > 1:
+                hard_lim[:2 * (bounds.state_bounds_from_step - 1)] = _INF
+        else:
+            hard_lim = inst.inf2
         lo = np.concatenate([
             -en, [0.0],
             -u_max_t - u_prev_t,
             -hard_lim - hard_free,
-            np.full(2 * n_p, -_INF),
+            inst.inf2 * -1.0,
             -band - e_free,
         ])
         hi = np.concatenate([
@@ -294,10 +321,10 @@ class MpcQp:
             u_max_t - u_prev_t,
             hard_lim - hard_free,
             band - e_free,
-            np.full(2 * n_p, _INF),
+            inst.inf2,
         ])
         # a u(k−1) outside its bound (never produced here) must not make l > u
-        lo = np.minimum(lo, hi)
+        np.minimum(lo, hi, out=lo)
 
         s = inst.solver
         s.update(q=qvec, l=lo, u=hi, Px=Px, Ax=Ax)

@@ -36,6 +36,11 @@ TWO_PI = 2.0 * math.pi
 
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
     """Wrap to (−π, π]."""
+    if isinstance(a, float | int):
+        w = math.fmod(a + math.pi, TWO_PI)
+        w = w + TWO_PI if w < 0.0 else w
+        w -= math.pi
+        return math.pi if w == -math.pi else w
     w = np.mod(np.asarray(a, float) + math.pi, TWO_PI) - math.pi
     w = np.where(w == -math.pi, math.pi, w)
     return float(w) if np.ndim(w) == 0 else w
@@ -145,6 +150,14 @@ class Reference:
                 i, t, off = self._project(px, py, 0, nseg)
         seg_len = self.s[i + 1] - self.s[i]
         s = float(self.s[i] + t * seg_len)
+        if 0.0 <= t <= 1.0:
+            j = i + 1
+
+            def lerp(a: np.ndarray) -> float:
+                return float(a[i] + t * (a[j] - a[i]))
+
+            return NearestPoint(i, s, lerp(self.x), lerp(self.y), lerp(self.yaw),
+                                lerp(self.curvature), lerp(self.speed), off)
         x, y, yaw, kappa, v = self.sample(np.array([s]))
         return NearestPoint(i, s, float(x[0]), float(y[0]), float(yaw[0]), float(kappa[0]),
                             float(v[0]), off)
@@ -182,6 +195,17 @@ class Reference:
             kappa = np.where(under, 0.0, kappa)
         return x, y, yaw, kappa, v
 
+    def sample_pose(self, s_query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y, yaw at arc lengths ``s_query`` (as :meth:`sample`, without the rest)."""
+        sq = np.asarray(s_query, float)
+        s = self.s
+        x = np.interp(sq, s, self.x)
+        y = np.interp(sq, s, self.y)
+        yaw = np.interp(sq, s, self.yaw)
+        if sq.size and (sq.max() > s[-1] or sq.min() < s[0]):
+            x, y, yaw, _, _ = self.sample(sq)
+        return x, y, yaw
+
     def horizon(self, near: NearestPoint, vx: float, dt_s: float, n_p: int,
                 vehicle_yaw: float, frame: str = "path") -> tuple[np.ndarray, np.ndarray]:
         """Reference outputs (φ_ref, Y_ref), each (Np,), at s + vx T i, i = 1..Np.
@@ -190,7 +214,7 @@ class Reference:
         within π of ``vehicle_yaw``). See the module docstring.
         """
         ds = max(vx, 0.0) * dt_s * np.arange(1, n_p + 1)
-        x, y, yaw, _, _ = self.sample(near.s + ds)
+        x, y, yaw = self.sample_pose(near.s + ds)
         if frame == "path":
             c, s = math.cos(near.yaw), math.sin(near.yaw)
             y_ref = -s * (x - near.x) + c * (y - near.y)

@@ -1,0 +1,38 @@
+"""Closed loop on the plant core (slow): the paper's ranking and APCHA's horizon behaviour."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fourws_bringup.core.closed_loop import run_closed_loop
+from fourws_common.resources import config_dir
+
+
+@pytest.mark.slow
+def test_ranking_improved_mpc4ws_mpcfws_on_max_lateral_error():
+    """Table 6's order on dlc_60_mu05 (one cost scaling for all presets, docs/mpc.md)."""
+    m = {c: run_closed_loop("dlc_60_mu05", c).metrics()["max_abs_lateral_error_m"]
+         for c in ("improved", "mpc_4ws", "mpc_fws")}
+    assert m["improved"] < m["mpc_4ws"] < m["mpc_fws"], m
+    assert m["improved"] < 0.089
+
+
+@pytest.mark.slow
+def test_apcha_horizons_grow_on_large_errors_and_return_to_baseline(tmp_path: Path):
+    base = config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml"
+    sc = yaml.safe_load(base.read_text(encoding="utf-8"))
+    sc["name"] = "dlc_60_mu05_offset"
+    sc["initial"]["y_m"] = 0.12                    # e_s = 0.24 ∈ (ε1, 2ε1] at the start
+    path = tmp_path / "offset.yaml"
+    path.write_text(yaml.safe_dump(sc), encoding="utf-8")
+    log = run_closed_loop(str(path), "improved")
+    assert log.completed, log.reason
+    n_p, n_c = log.mpc["np"], log.mpc["nc"]
+    assert list(n_p[:4]) == [14, 16, 18, 20]           # towards N_p^t = 20, ΔN_p per period
+    assert n_p.max() >= 20 and n_c.max() >= 8          # grown on the large error
+    tail = slice(-200, None)                           # last 2 s: small errors
+    assert np.all(n_p[tail] == 12) and np.all(n_c[tail] <= 6)
+    assert np.abs(log.mpc["lateral_error"][tail]).max() < 0.02
+    assert not log.mpc["fallback"][tail].any()
