@@ -22,6 +22,7 @@ of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -122,9 +123,19 @@ def load_pid_config() -> SpeedPidConfig:
     return from_mapping(SpeedPidConfig, values)
 
 
-def _plant_timing() -> tuple[float, float]:
-    values = load_ros_params_yaml(str(config_dir("fourws_sim") / "plant.yaml"), "plant_node")
-    return float(values.get("dt_s", 0.01)), float(values.get("substep_s", 0.001))
+def _plant_params() -> dict[str, Any]:
+    return load_ros_params_yaml(str(config_dir("fourws_sim") / "plant.yaml"), "plant_node")
+
+
+def with_plant_aborts(scenario: Scenario, plant: dict[str, Any]) -> Scenario:
+    """The scenario with plant_node's abort limits, which override the scenario's own (as
+    in the graph), so the in-process loop ends a run exactly where the plant node does."""
+    return dataclasses.replace(
+        scenario,
+        abort_lateral_error_m=float(plant.get("abort_lateral_error_m",
+                                              scenario.abort_lateral_error_m)),
+        abort_sideslip_rad=math.radians(float(plant["abort_sideslip_deg"]))
+        if "abort_sideslip_deg" in plant else scenario.abort_sideslip_rad)
 
 
 def reference_of(scenario: Scenario, cfg: MpcConfig | None = None) -> Reference:
@@ -147,10 +158,11 @@ def run_closed_loop(
 
     ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests).
     """
-    scenario = load_scenario(scenario_name_or_path)
+    plant = _plant_params()
+    scenario = with_plant_aborts(load_scenario(scenario_name_or_path), plant)
     mpc_cfg = load_mpc_config(controller_name, mpc_overrides)
     alloc_cfg = load_allocator_config(controller_name)
-    dt, substep = _plant_timing()
+    dt, substep = float(plant.get("dt_s", 0.01)), float(plant.get("substep_s", 0.001))
     if abs(dt - mpc_cfg.dt_s) > 1e-12:
         raise ValueError(f"dt_s: plant period {dt} s differs from the MPC's {mpc_cfg.dt_s} s")
     sim = Simulator.from_scenario(scenario, substep_s=substep)
