@@ -158,6 +158,17 @@ def _fmt(v) -> str:
     return f"{v:.5f}" if isinstance(v, float) else str(v)
 
 
+def rank(metrics: dict[str, dict], key: str) -> list[str]:
+    """Controllers best first on ``key``: runs that completed the manoeuvre rank by the
+    metric, ahead of every run that aborted (left the road or spun), which rank by how long
+    they lasted. An aborted run's error statistics cover only part of the path."""
+    def order(c: str):
+        m = metrics[c]
+        done = bool(m.get("completed"))
+        return (0, m[key]) if done else (1, -float(m.get("sim_time_s", 0.0)), m[key])
+    return sorted(metrics, key=order)
+
+
 def format_tables(results: dict[tuple[str, str], dict]) -> str:
     """The three tables, ours beside the paper's, as Markdown."""
     lines = []
@@ -168,10 +179,12 @@ def format_tables(results: dict[tuple[str, str], dict]) -> str:
         for ctrl, ref in paper.items():
             m = results.get((ctrl, scenario))
             ours = [_fmt(m.get(k)) if m else "not run" for k in keys]
+            if m and not m.get("completed"):
+                ours[0] += f" (aborted at {m.get('sim_time_s', 0.0):.1f} s)"
             lines.append(f"| {ctrl} | fourws | " + " | ".join(ours) + " |")
             lines.append(f"| {ctrl} | paper | " + " | ".join(f"{v:.5f}" for v in ref) + " |")
-        order = sorted((c for c in paper if (c, scenario) in results),
-                       key=lambda c: results[(c, scenario)]["max_abs_lateral_error_m"])
+        order = rank({c: results[(c, scenario)] for c in paper if (c, scenario) in results},
+                     "max_abs_lateral_error_m")
         paper_order = sorted(paper, key=lambda c: paper[c][0])
         lines += ["", f"Ranking on max |eY| (best first): fourws {' < '.join(order)}; "
                       f"paper {' < '.join(paper_order)}"
