@@ -190,20 +190,20 @@ class VehicleParams:
     motor_torque_max_nm: float = param(500.0, "in-wheel motor torque limit (each, +/-)",
                                        lo=1.0, hi=5000.0, unit="N*m")
     steer_front_time_constant_s: float = param(
-        0.05, "front steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
+        0.02, "front steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
     )
     steer_rear_time_constant_s: float = param(
-        0.05, "rear steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
+        0.02, "rear steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
     )
     max_steer_front_deg: float = param(30.0, "front road-wheel angle limit (eq. 20)", lo=1.0,
                                        hi=60.0, unit="deg")
     max_steer_rear_deg: float = param(10.0, "rear road-wheel angle limit (eq. 20)", lo=0.0,
                                       hi=60.0, unit="deg")
     max_steer_rate_front_deg_s: float = param(
-        40.0, "front road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
+        80.0, "front road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
     )
     max_steer_rate_rear_deg_s: float = param(
-        30.0, "rear road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
+        60.0, "rear road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
     )
 
     def __post_init__(self) -> None:
