@@ -1,0 +1,56 @@
+"""`fourws run` with bad input: an existing output folder, a node that dies, a bad scenario."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+import yaml
+
+pytestmark = pytest.mark.integration
+
+
+def _fourws(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["fourws", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_existing_output_folder_is_not_overwritten_without_force(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    keep = out / "precious.txt"
+    keep.write_text("do not delete")
+    r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", "improved",
+                "--out", str(out))
+    assert r.returncode == 2
+    assert str(out) in r.stderr and "--force" in r.stderr
+    assert keep.read_text() == "do not delete"
+
+
+def test_unknown_controller_and_overdemanding_scenario_are_clear_errors(tmp_path):
+    r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", "nope",
+                "--out", str(tmp_path / "a"))
+    assert r.returncode == 2 and "unknown controller 'nope'" in r.stderr
+    bad = tmp_path / "too_hard.yaml"
+    bad.write_text(yaml.safe_dump({
+        "name": "too_hard", "speed_kmh": 90.0, "road": {"type": "constant", "mu": 0.3},
+        "path": {"type": "tanh_dlc", "stretch": 1.0}, "duration_s": 5.0}))
+    r = _fourws("run", "--scenario", str(bad), "--controller", "improved",
+                "--out", str(tmp_path / "b"))
+    assert r.returncode == 2 and "μg" in r.stderr
+
+
+def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path):
+    preset = tmp_path / "broken.yaml"
+    preset.write_text(yaml.safe_dump({
+        "mpc_node": {"ros__parameters": {"controller": "broken", "q_y": -5.0}},
+        "allocator_node": {"ros__parameters": {"method": "optimal"}}}))
+    out = tmp_path / "run"
+    r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", str(preset),
+                "--out", str(out), "--no-plots")
+    assert r.returncode == 1
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["completed"] is False and m["died"] == "mpc_node"
+    assert "mpc_node" in m["reason"]
+    assert (out / "logs" / "mpc_node.log").read_text().count("q_y") >= 1
+    assert (out / "bag" / "metadata.yaml").is_file(), "the run's bag folder is kept"
