@@ -1,9 +1,8 @@
 """Test node: relays /chatter_cmd to /relayed_cmd, doubling delta_front."""
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+from fourws_common.node_main import run_node
 from fourws_msgs.msg import MpcCommand
 
 
@@ -19,17 +18,7 @@ class Relay(Node):
 
 
 def main() -> None:
-    rclpy.init()
-    node = None
-    try:
-        node = Relay()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    raise SystemExit(run_node(Relay))
 
 
 if __name__ == "__main__":

@@ -1,9 +1,8 @@
 """Test node: publishes fourws_msgs/MpcCommand on /chatter_cmd at 50 Hz, counting up."""
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+from fourws_common.node_main import run_node
 from fourws_msgs.msg import MpcCommand
 
 
@@ -20,17 +19,7 @@ class Talker(Node):
 
 
 def main() -> None:
-    rclpy.init()
-    node = None
-    try:
-        node = Talker()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    raise SystemExit(run_node(Talker))
 
 
 if __name__ == "__main__":
