@@ -29,17 +29,17 @@ class RunError(RuntimeError):
 
 
 def controller_preset(name_or_path: str) -> Path:
-    """Path of a controller preset: a name in fourws_bringup/config/controllers or a file."""
+    """Path of a controller preset: a name in fourws_bringup/config/controllers or a file
+    (:func:`fourws_bringup.core.closed_loop.controller_preset_path`), as a ``RunError``."""
+    from .core.closed_loop import controller_preset_path
+
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml"):
-        if not p.is_file():
-            raise RunError(f"controller preset file not found: {p}")
-        return p.resolve()
-    path = config_dir("fourws_bringup") / "controllers" / f"{name_or_path}.yaml"
-    if not path.is_file():
-        known = sorted(q.stem for q in path.parent.glob("*.yaml"))
-        raise RunError(f"unknown controller '{name_or_path}'; known: {', '.join(known)}")
-    return path
+    if p.suffix in (".yaml", ".yml") and not p.is_file():
+        raise RunError(f"controller preset file not found: {p}")
+    try:
+        return controller_preset_path(name_or_path).resolve()
+    except ValueError as exc:
+        raise RunError(f"unknown controller '{name_or_path}': {exc}") from None
 
 
 def scenario_arg(name_or_path: str) -> str:

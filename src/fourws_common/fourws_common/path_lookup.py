@@ -39,3 +39,23 @@ class PathIndex:
         d2 = (self.x - px) ** 2 + (self.y - py) ** 2
         self._last = int(np.argmin(d2))
         return self._last
+
+
+class SpeedProfile:
+    """Reference speed v (m/s) and its feed-forward acceleration a = v·dv/ds (m/s²) at the
+    path sample nearest to the car. The one lookup both speed_pid_node and the in-process
+    closed loop use, so the two give the same drive demand."""
+
+    def __init__(self, x: np.ndarray, y: np.ndarray, speed: np.ndarray) -> None:
+        self.index = PathIndex(x, y)
+        self.speed = np.asarray(speed, dtype=float)
+        if self.speed.shape != self.index.x.shape or not np.all(np.isfinite(self.speed)):
+            raise ValueError("speed profile missing, of the wrong length or non-finite")
+        ds = np.hypot(np.diff(self.index.x), np.diff(self.index.y))
+        dv_ds = np.diff(self.speed) / np.maximum(ds, 1e-9)
+        self.accel = self.speed * np.append(dv_ds, dv_ds[-1])
+
+    def at(self, px: float, py: float) -> tuple[float, float]:
+        """(v_ref m/s, a_ref m/s²) at the sample nearest to (px, py)."""
+        i = self.index.nearest(px, py)
+        return float(self.speed[i]), float(self.accel[i])

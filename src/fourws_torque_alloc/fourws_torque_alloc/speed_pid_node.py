@@ -10,12 +10,11 @@ them, and nothing is published before a reference has arrived.
 
 from __future__ import annotations
 
-import numpy as np
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, non_finite_fields, stamp_to_ns
 from fourws_common.node_main import run_node
-from fourws_common.path_lookup import PathIndex
+from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
 from fourws_common.ros_params import ParamBinding
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
@@ -30,9 +29,7 @@ class SpeedPidNode(Node):
         super().__init__("speed_pid_node")
         self.params = ParamBinding(self, SpeedPidConfig, on_change=self._on_params)
         self.pid = SpeedPid(self.params.config)
-        self.path: PathIndex | None = None
-        self.speed = np.zeros(0)
-        self.accel_ref = np.zeros(0)
+        self.profile: SpeedProfile | None = None
         self.last_stamp_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.reject_log = RateLimitedLog(self.get_logger().warning)
@@ -49,19 +46,13 @@ class SpeedPidNode(Node):
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
-            path = PathIndex(msg.x, msg.y)
-            speed = np.asarray(msg.speed, dtype=float)
-            if speed.shape != path.x.shape or not np.all(np.isfinite(speed)):
-                raise ValueError("speed profile missing, of the wrong length or non-finite")
+            profile = SpeedProfile(msg.x, msg.y, msg.speed)
         except ValueError as exc:
             self.get_logger().error(f"rejected reference trajectory: {exc}")
             return
-        ds = np.hypot(np.diff(path.x), np.diff(path.y))
-        dv_ds = np.diff(speed) / np.maximum(ds, 1e-9)
-        self.accel_ref = speed * np.append(dv_ds, dv_ds[-1])
-        self.path, self.speed = path, speed
-        self.get_logger().info(f"reference with {speed.size} points, speed "
-                               f"{speed.min():.2f}..{speed.max():.2f} m/s")
+        self.profile = profile
+        self.get_logger().info(f"reference with {profile.speed.size} points, speed "
+                               f"{profile.speed.min():.2f}..{profile.speed.max():.2f} m/s")
 
     def _on_state(self, msg: VehicleState) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
@@ -72,7 +63,7 @@ class SpeedPidNode(Node):
         if bad:
             self.reject_log(stamp_ns, f"rejected vehicle state with non-finite {bad}")
             return
-        if self.path is None:
+        if self.profile is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
         dt_s = (NOMINAL_DT_S if self.last_stamp_ns is None
@@ -81,8 +72,8 @@ class SpeedPidNode(Node):
             self.reject_log(stamp_ns, f"rejected state stamped {stamp_ns} ns: not after the "
                             f"last one ({self.last_stamp_ns} ns)")
             return
-        i = self.path.nearest(msg.x, msg.y)
-        out = self.pid.step(float(self.speed[i]), msg.vx, dt_s, float(self.accel_ref[i]))
+        v_ref, a_ref = self.profile.at(msg.x, msg.y)
+        out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
         cmd = DriveCommand(force=out.force_n, torque=out.torque_nm)
         cmd.header = msg.header
         self.last_stamp_ns, self.cached = stamp_ns, cmd

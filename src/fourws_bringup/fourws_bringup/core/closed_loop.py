@@ -9,7 +9,7 @@ Same sequencing as the lockstep graph (design.md) at every step k::
 
 until the scenario ends (its ``check_end``: end X, duration, end of path, or an abort) or
 ``max_steps``. As in speed_pid_node, v_ref is the reference speed at the path sample nearest
-to the car (``fourws_common.path_lookup.PathIndex``) and a_ref = v dv/ds there.
+to the car and a_ref = v dv/ds there (``fourws_common.path_lookup.SpeedProfile``).
 Configuration comes from the same YAML files as the nodes:
 ``fourws_mpc/config/mpc.yaml`` with the controller preset
 ``fourws_bringup/config/controllers/<name>.yaml`` merged over it (``mpc_node`` and
@@ -33,7 +33,7 @@ import numpy as np
 
 from fourws_bringup.core.metrics import run_metrics
 from fourws_common.params import from_mapping, load_ros_params_yaml
-from fourws_common.path_lookup import PathIndex
+from fourws_common.path_lookup import SpeedProfile
 from fourws_common.resources import config_dir
 from fourws_mpc.core.controller import MpcConfig, MpcController
 from fourws_mpc.core.reference import Reference
@@ -170,11 +170,7 @@ def run_closed_loop(
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
     ref = reference_of(scenario, mpc_cfg)
-    path = scenario.path
-    speed_index = PathIndex(path.x, path.y)
-    speed = np.asarray(path.speed, dtype=float)
-    dv_ds = np.diff(speed) / np.maximum(np.hypot(np.diff(path.x), np.diff(path.y)), 1e-9)
-    accel_ref = speed * np.append(dv_ds, dv_ds[-1])
+    speed_ref = SpeedProfile(scenario.path.x, scenario.path.y, scenario.path.speed)
 
     st: dict[str, list] = {k: [] for k in STATE_FIELDS + WHEEL_FIELDS}
     mp: dict[str, list] = {k: [] for k in MPC_FIELDS}
@@ -187,8 +183,8 @@ def run_closed_loop(
         t0 = clock() if clock is not None else 0.0
         res = mpc.step(out.t_s, out, ref, mu=float(np.mean(out.mu)))
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
-        i = speed_index.nearest(out.x, out.y)
-        drive = pid.step(float(speed[i]), out.vx, dt, float(accel_ref[i]))
+        v_ref, a_ref = speed_ref.at(out.x, out.y)
+        drive = pid.step(v_ref, out.vx, dt, a_ref)
         a = alloc.allocate(drive.torque_nm, res.yaw_moment, out.fz, out.fy, out.mu)
         for name in STATE_FIELDS + WHEEL_FIELDS:
             st[name].append(np.array(getattr(out, name), dtype=float))
