@@ -49,6 +49,7 @@ def test_every_run_completes_and_is_recorded(runs):
         assert json.loads((folder / "metrics.json").read_text()) == m
         assert m["completed"], (c, m["reason"])
         assert m["steps"] > 900 and m["real_time_factor"] > 0 and m["reason"], c
+        assert m["missing_steps"] == 0, (c, "the recorder lost steps")
 
 
 def test_controllers_track_and_rank_on_sideslip_over_topics(runs):

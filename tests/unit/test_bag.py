@@ -208,7 +208,7 @@ def test_bag_reads_back_whole_with_rosbags_reader_and_anyreader(tmp_path):
         by_topic = {c.topic: c for c in r.connections}
         assert by_topic["/reference/trajectory"].ext.offered_qos_profiles[0].durability == \
             QosDurability.TRANSIENT_LOCAL
-        assert by_topic["/vehicle/state"].ext.offered_qos_profiles[0].depth == 100
+        assert by_topic["/vehicle/state"].ext.offered_qos_profiles[0].depth == 1000
         logged = [(c.topic, t) for c, t, _ in r.messages()]
     expected_order = sorted((t, topic) for topic, v in written.items() for t, _ in v)
     assert [t for _, t in logged] == [t for t, _ in expected_order]
@@ -440,3 +440,14 @@ def test_recover_of_a_whole_file_keeps_everything(tmp_path):
     n = recover(tmp_path / "bag", tmp_path / "copy.mcap")
     assert n == sum(len(v) for v in written.values())
     assert _messages(tmp_path / "copy.mcap") == _messages(tmp_path / "bag" / "bag_0.mcap")
+
+
+def test_bag_qos_table_matches_the_graph_profiles():
+    from fourws_bringup.bag import QOS_KINDS
+    from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+
+    for kind, profile in (("control", CONTROL_QOS), ("latched", LATCHED_QOS),
+                          ("clock", CLOCK_QOS)):
+        assert QOS_KINDS[kind]["depth"] == profile.depth, kind
+        assert QOS_KINDS[kind]["durability"] == profile.durability.name.lower(), kind
+        assert QOS_KINDS[kind]["reliability"] == profile.reliability.name.lower(), kind

@@ -148,3 +148,21 @@ def test_markdown_helpers():
                                   "| improved | 0.0891 | n/a | True |"]
     md = figures_markdown([Path("/r/x/plots/lateral_error.png")], "/r", heading="Figures")
     assert md == "### Figures\n\n![lateral error](x/plots/lateral_error.png)\n"
+
+
+def test_missing_steps_counts_gaps_in_any_per_step_topic():
+    from fourws_bringup.paper import missing_steps
+
+    run = make_run(n=200)
+    assert missing_steps(run) == 99                  # make_run's diagnostics: every other step
+    full = {"stamp_ns": run.state["stamp_ns"], "t_s": run.state["t_s"]}
+    run = RunData(**{**run.__dict__, "mpc_diagnostics": full})
+    assert missing_steps(run) == 0
+    keep = np.ones(200, bool)
+    keep[[50, 51, 120]] = False                      # a recorder that lost 3 commands
+    cmd = {k: v[keep] for k, v in run.mpc_command.items()}
+    assert missing_steps(RunData(**{**run.__dict__, "mpc_command": cmd})) == 3
+    keep = np.ones(200, bool)
+    keep[100:110] = False                            # ... or 10 states
+    st = {k: v[keep] for k, v in run.state.items()}
+    assert missing_steps(RunData(**{**run.__dict__, "state": st})) == 10

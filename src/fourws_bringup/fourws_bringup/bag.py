@@ -53,11 +53,11 @@ class BagError(Exception):
 # Topics of the fourws graph and their QoS (design.md); fourws_common.qos holds the profiles.
 # ---------------------------------------------------------------------------------------------
 QOS_KINDS: dict[str, dict[str, Any]] = {
-    "control": {"history": "keep_last", "depth": 100, "reliability": "reliable",
+    "control": {"history": "keep_last", "depth": 1000, "reliability": "reliable",
                 "durability": "volatile"},
     "latched": {"history": "keep_last", "depth": 1, "reliability": "reliable",
                 "durability": "transient_local"},
-    "clock": {"history": "keep_last", "depth": 100, "reliability": "reliable",
+    "clock": {"history": "keep_last", "depth": 1000, "reliability": "reliable",
               "durability": "volatile"},
 }
 

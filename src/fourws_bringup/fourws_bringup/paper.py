@@ -104,7 +104,32 @@ def metrics_from_run(run) -> dict:
             m[f"{key}_min"], m[f"{key}_max"] = int(np.min(v)), int(np.max(v))
     fb = diag.get("fallback")
     m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
+    m["missing_steps"] = missing_steps(run)
     return m
+
+
+def missing_steps(run) -> int:
+    """Step stamps absent from the bag: on the state's period grid between its first and
+    last stamp, the largest count missing from any per-step topic (0 for a complete record).
+
+    A recorder that fell behind its subscriptions' queues loses messages without an error;
+    this finds the gap from the data alone, for any bag (also recovered ones).
+    """
+    import numpy as np
+
+    stamps = np.asarray(run.state["stamp_ns"], dtype=np.int64)
+    if len(stamps) < 2:
+        return 0
+    period = int(np.median(np.diff(stamps)))
+    if period <= 0:
+        return 0
+    grid = stamps[0] + period * np.arange(int(round((stamps[-1] - stamps[0]) / period)) + 1)
+    worst = int(np.sum(~np.isin(grid, stamps)))
+    # Commands exist for every state but the last (its answer may still be in flight).
+    for topic in (run.mpc_command, run.mpc_diagnostics, run.drive_command, run.wheel_torques):
+        if len(topic["stamp_ns"]):
+            worst = max(worst, int(np.sum(~np.isin(grid[:-1], topic["stamp_ns"]))))
+    return max(worst, 0)
 
 
 def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,

@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass
 
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -132,9 +133,12 @@ class RecorderNode(Node):
         self.context.on_shutdown(self.finalise)
         self.received = 0
         self._last_rx = time.monotonic()
+        self.lost: dict[str, int] = {}
         for info in infos:
-            self.create_subscription(classes[info.name], info.name, self._callback(info.name),
-                                     profiles[info.name], raw=True)
+            self.create_subscription(
+                classes[info.name], info.name, self._callback(info.name), profiles[info.name],
+                raw=True, event_callbacks=SubscriptionEventCallbacks(
+                    message_lost=self._lost_callback(info.name)))
         self.create_timer(0.05, self._check_stop)
         self.get_logger().info(
             f"recording {len(infos)} topics to {self.writer.path} (chunks of "
@@ -160,6 +164,15 @@ class RecorderNode(Node):
                 self.received += 1
         return on_message
 
+    def _lost_callback(self, topic: str):
+        def on_lost(info) -> None:
+            self.lost[topic] = int(info.total_count)
+            self.get_logger().warning(
+                f"{topic}: {info.total_count_change} message(s) lost before the recorder took "
+                f"them ({info.total_count} so far); the queue depth was too small for the lag",
+                throttle_duration_sec=1.0)
+        return on_lost
+
     def _on_signal(self, signum, _frame) -> None:
         if self._stop_requested_at is None:
             self._stop_requested_at = time.monotonic()
@@ -183,8 +196,10 @@ class RecorderNode(Node):
             self._finalised = True
             self.writer.close()
             counts = {k: r.message_count for k, r in self.writer.records.items()}
+        lost = f"; LOST {self.lost}" if self.lost else ""
         self.get_logger().info(f"bag {self.writer.folder} closed: {sum(counts.values())} "
-                               f"messages ({', '.join(f'{k} {v}' for k, v in counts.items())})")
+                               f"messages ({', '.join(f'{k} {v}' for k, v in counts.items())})"
+                               f"{lost}")
 
     def destroy_node(self) -> None:
         self.finalise()
