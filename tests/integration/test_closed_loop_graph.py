@@ -18,6 +18,8 @@ import subprocess
 
 import numpy as np
 import pytest
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import HistoryPolicy, QoSProfile
 
 from fourws_bringup.bag import read_run
 from fourws_bringup.core.closed_loop import run_closed_loop
@@ -81,12 +83,20 @@ def test_replay_into_a_fresh_mpc_reproduces_the_recorded_commands(runs, graph, r
     folder = runs["improved"][0]
     recorded = read_run(folder)
     got: dict[int, MpcCommand] = {}
-    ros.node.create_subscription(MpcCommand, "/control/mpc_command",
-                                 lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m),
-                                 CONTROL_QOS)
+    matched: list[int] = []
+    # The replay runs to its end while graph() waits for the node, i.e. while this process does
+    # not spin: queue the whole run, and be matched to the MPC before the replay starts.
+    whole_run = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
+                           reliability=CONTROL_QOS.reliability, durability=CONTROL_QOS.durability)
+    ros.node.create_subscription(
+        MpcCommand, "/control/mpc_command",
+        lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m), whole_run,
+        event_callbacks=SubscriptionEventCallbacks(
+            matched=lambda info: matched.append(info.current_count)))
     preset = config_dir("fourws_bringup") / "controllers" / "improved.yaml"
     graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
                     params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)])])
+    assert ros.spin_until(lambda: bool(matched) and matched[-1] >= 1, 30.0), "MPC not matched"
     graph([NodeSpec("replay_node", "fourws_bringup", "replay_node", parameters={
         "bag": str(folder / "bag"), "rate": 0.0,
         "topics": "[/vehicle/state,/reference/trajectory]",
