@@ -71,7 +71,11 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     out = {"scenario": Path(scenario).stem, "controller": controller}
     out["steps"] = int(m.pop("steps"))
     out["sim_time_s"] = float(m.pop("sim_time_s"))
-    wall = outcome.wall_time_s if outcome else float(status.get("wall_time_s", float("nan")))
+    # The plant's own span from its first state to the end (in the bag); the runner's clock
+    # only when the bag has none (a plant that died).
+    wall = status.get("wall_time_s")
+    if not isinstance(wall, int | float) or not wall > 0:
+        wall = outcome.wall_time_s if outcome else float("nan")
     out["wall_time_s"] = wall
     out["real_time_factor"] = out["sim_time_s"] / wall if wall and wall == wall else None
     out.update(m)

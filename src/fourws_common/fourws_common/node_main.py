@@ -2,9 +2,9 @@
 
 Executor: rclpy's ``EventsExecutor`` (``rclpy.experimental``, in Jazzy) by default. At 100 Hz
 lockstep with ~15 message deliveries per step over six Python processes on two cores, the
-``SingleThreadedExecutor`` spends most of the CPU rebuilding its wait set on every
-``spin_once``; the events executor dispatches from a C++ event queue and ran the same graph
-4.4x faster (real-time factor 1.38 -> 6.1 on dlc_60_mu05, identical results). Set
+``SingleThreadedExecutor`` spends much of its CPU rebuilding its wait set on every
+``spin_once``; with the events executor the same run (improved on dlc_90_mu06, recorder on)
+went from a real-time factor of 1.37 to 2.25-2.33, with identical results. Set
 ``FOURWS_EXECUTOR=single`` to fall back to the stable executor.
 """
 

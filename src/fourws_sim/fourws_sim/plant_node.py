@@ -118,11 +118,13 @@ class PlantNode(Node):
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
         log.info(f"mode {cfg.mode}, dt {cfg.dt_s} s, substep {cfg.substep_s} s")
+        self.start_wall: float | None = None  # monotonic s at the first state: the run's wall time
         self._publish_reference()
         self._publish_status("running", "")
         self.outputs = self.sim.outputs()
         self.started = cfg.mode == "realtime" or cfg.wait_for_subscribers == 0
         if self.started:
+            self.start_wall = time.monotonic()
             self._publish_state()
         if cfg.mode == "realtime":
             self.create_timer(cfg.dt_s, self._realtime_tick)
@@ -231,6 +233,7 @@ class PlantNode(Node):
                 self.last_progress = now
                 return
             self.started = True
+            self.start_wall = time.monotonic()
             self.get_logger().info("all subscribers present: starting")
             self._publish_state()
             return
@@ -303,10 +306,13 @@ class PlantNode(Node):
         self.pub_path.publish(path)
 
     def _publish_status(self, state: str, reason: str, completed: bool = False) -> None:
+        """/run/status JSON. ``wall_time_s``: from the first state to now (the plant's own
+        monotonic clock), so the real-time factor is in the bag and excludes start-up."""
+        wall = None if self.start_wall is None else time.monotonic() - self.start_wall
         self.pub_status.publish(String(data=json.dumps({
             "state": state, "completed": completed, "reason": reason, "steps": self.step_k,
             "sim_time_s": self.step_k * self.dt_ns * 1e-9, "scenario": self.scenario.name,
-            "rejected_commands": self.reject_log.count,
+            "rejected_commands": self.reject_log.count, "wall_time_s": wall,
         })))
 
 
