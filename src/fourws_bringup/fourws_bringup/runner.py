@@ -120,8 +120,7 @@ class _Monitor:
         self.node.create_subscription(String, "/run/status", self._on_status, LATCHED_QOS)
         from rclpy.experimental import EventsExecutor
 
-        # /clock arrives at 100 Hz x the real-time factor; the events executor takes it at a
-        # fraction of the SingleThreadedExecutor's CPU, which the graph's nodes need.
+        # The nodes' executor (fourws_common.node_main); /clock arrives at 100 Hz x the RTF.
         self.ex = EventsExecutor(context=self.ctx)
         self.ex.add_node(self.node)
 
