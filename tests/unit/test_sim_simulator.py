@@ -62,6 +62,15 @@ def test_derivative_rows_follow_the_state_enum():
     assert d[State.VY] == pytest.approx(info["ay"] - vx * y[State.R])
     assert d[State.AX_FILTERED] == pytest.approx(
         (info["ax"] - y[State.AX_FILTERED]) / P.load_transfer_time_constant_s)
+    # transient slip: dα'/dt = (α − α') max(|v_x,i|, v_min) / σ(F_z), wheel-frame v_x,i
+    sigma = P.relaxation_length_m(np.array(info["fz"]))
+    xw, yw = P.wheel_positions_m()
+    r = y[State.R]
+    for i, steer in enumerate((State.STEER_FRONT,) * 2 + (State.STEER_REAR,) * 2):
+        vxi = (vx - yw[i] * r) * math.cos(y[steer]) + (vy + xw[i] * r) * math.sin(y[steer])
+        den = max(abs(vxi), P.slip_speed_min_mps)
+        assert d[State.ALPHA_FL + i] == pytest.approx(
+            (info["alpha"][i] - y[State.ALPHA_FL + i]) * den / sigma[i])
 
 
 def test_time_is_on_the_step_grid_and_clipping_is_reported():

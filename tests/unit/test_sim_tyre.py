@@ -137,7 +137,8 @@ def test_inlined_vehicle_tyre_equals_slips_plus_forces(vxw, vyw, omega_r, fz, mu
     kappa, alpha = tyre.slips(np.array(vxw), np.array(vyw), np.array(omega_r), 1.0, v_min)
     fx, fy = tyre.forces(kappa, alpha, fz, mu, REAR)
     k = REAR.scalar_constants(REAR.cornering_coeff)
-    ix, iy = _tyre_forces(vxw, vyw, omega_r, fz, mu, v_min, k)
+    den = max(abs(vxw), v_min)
+    ix, iy = _tyre_forces(vxw, den, -math.atan(vyw / den), omega_r, fz, mu, k)
     assert ix == pytest.approx(float(fx), rel=1e-9, abs=1e-7)
     assert iy == pytest.approx(float(fy), rel=1e-9, abs=1e-7)
 

@@ -1,7 +1,7 @@
 """The plant: vehicle model + road + actuators, stepped with fixed-step RK4.
 
 ``Simulator.step`` holds the commands (δf, δr, four wheel torques) constant for ``dt_s``
-(zero-order hold, as a 100 Hz controller does) and integrates the 22-state model of
+(zero-order hold, as a 100 Hz controller does) and integrates the 26-state model of
 ``vehicle.py`` with classical RK4 at ``substep_s`` (default 1 ms; ``dt_s`` must be an integer
 multiple; from 2.5 ms up the wheel-spin mode goes unstable at low speed, see ``vehicle.py``).
 Commands outside the actuator limits are clipped (``last_clipped`` names the
@@ -13,7 +13,8 @@ inputs give bit-identical outputs. Time is the integer count of substeps times t
 rounded to 1e-12 s, so the 10 ms grid has no accumulated drift.
 
 Initial state: the scenario's position, heading and speed, v_y = r = 0, wheels rolling
-freely (ω = v/R), actuators at rest (zero torque, zero steer), no load transfer.
+freely (ω = v/R), actuators at rest (zero torque, zero steer), no load transfer, transient
+slip angles at their steady values.
 
 ``PlantOutputs`` holds every field of the VehicleState message (SI units): accelerations are
 accelerometer-style body-frame CG accelerations a_x = v̇x − v_y r, a_y = v̇y + v_x r; the
@@ -31,7 +32,7 @@ import numpy as np
 
 from fourws_sim.core.actuators import check_finite_commands, clip_commands
 from fourws_sim.core.road import Road
-from fourws_sim.core.vehicle import N_STATE, State, TwoTrackModel, VehicleParams
+from fourws_sim.core.vehicle import ALPHA, N_STATE, State, TwoTrackModel, VehicleParams
 
 if TYPE_CHECKING:
     from fourws_sim.core.scenario import Scenario
@@ -108,8 +109,11 @@ class Simulator:
         omega = initial.speed / vehicle.wheel_radius_m
         for i in range(4):
             y[State.OMEGA_FL + i] = omega
-        self._y = y
         self._u: tuple[float, ...] = (0.0,) * 6
+        info: dict[str, Any] = {}
+        self._model.derivatives(y, self._u, self._mu(y), info)
+        y[ALPHA] = info["alpha"]
+        self._y = y
         self.last_clipped: tuple[str, ...] = ()
         """Names of the command channels clipped in the last :meth:`step`."""
 

@@ -6,7 +6,7 @@ yaw moment and steer angles positive to the left). Wheel order FL, FR, RL, RR.
 States (:class:`State`): body velocities v_x, v_y and yaw rate r; position X, Y and yaw ψ
 (continuous, not wrapped); the four wheel spin rates ω_i; per motor the actual torque T_i
 and its rate Ṫ_i (eq. 32); the actual road-wheel angles δ_f, δ_r; the two filtered CG
-accelerations used for load transfer.
+accelerations used for load transfer; the four transient slip angles α'_i.
 
 Wheel i sits at (x_i, y_i) = (a, +B_f/2), (a, −B_f/2), (−b, +B_r/2), (−b, −B_r/2). Front
 wheels steer by δ_f, rear wheels by δ_r (parallel steer, no Ackermann). Contact-point velocity
@@ -40,6 +40,20 @@ with â_x, â_y the CG accelerations passed through a first-order lag of time co
 loads and the accelerations they produce, and stands for the roll and pitch response of the
 sprung mass (a roll mode of ≈ 1.6 Hz and ζ ≈ 0.4 lags by about 2ζ/ω_n ≈ 0.08 s); in steady state
 it equals the quasi-static transfer. Loads are clipped at 0 (wheel lift).
+
+Transient lateral slip (Pacejka, "Tire and Vehicle Dynamics", 3rd ed., 2012, §7.2: single
+contact point, first-order lag over a rolling distance σ): the tyre force uses the transient
+slip angle α'_i in place of the kinematic α_i::
+
+    dα'_i/dt = (α_i − α'_i) max(|v_x,i|, v_min) / σ_i
+    σ_i = p_Ty1 R sin(2 atan(F_z,i / (p_Ty2 F_z0)))          (MF 5.2 σ_α0, no camber)
+
+p_Ty1 is the peak of σ over the wheel radius, reached at F_z = p_Ty2 F_z0; σ_i is floored at
+0.05 m so the lag stays resolved by the 1 ms RK4 substep at any speed (a lifted wheel has
+no force to lag). Longitudinal slip has no lag (σ_κ is a few centimetres; the wheel-spin
+mode already gives it dynamics). At speed v this is a lag of σ/v (13 ms at 60 km/h with
+σ = 0.22 m) that eq. (1) of the paper does not contain. p_Ty1 = 0 turns it off: α'_i are
+then held at their initial value and not used.
 
 Numerics: the wheel-spin mode has the eigenvalue λ ≈ −R² K_κ / (I_w max(|v_x|, v_min))
 (K_κ = c_κ F_z). Fixed-step RK4 at h = 1 ms is stable for |λ| h < 2.78, which with the
@@ -104,11 +118,18 @@ class State(IntEnum):
     STEER_REAR = 19
     AX_FILTERED = 20
     AY_FILTERED = 21
+    ALPHA_FL = 22
+    ALPHA_FR = 23
+    ALPHA_RL = 24
+    ALPHA_RR = 25
 
 
 N_STATE = len(State)
 OMEGA = slice(State.OMEGA_FL, State.OMEGA_RR + 1)
 TORQUE = slice(State.TORQUE_FL, State.TORQUE_RR + 1)
+ALPHA = slice(State.ALPHA_FL, State.ALPHA_RR + 1)
+SIGMA_MIN_M = 0.05
+"""Floor of the lateral relaxation length, m (keeps the slip lag resolved by a 1 ms substep)."""
 WHEEL_SIDE = (1.0, -1.0, 1.0, -1.0)
 """+1 for the left wheels, −1 for the right wheels (FL, FR, RL, RR)."""
 
@@ -181,6 +202,13 @@ class VehicleParams:
     tyre_shape_longitudinal: float = param(1.65, "Magic Formula C_x", lo=1.01, hi=1.99, unit="1")
     tyre_curvature_longitudinal: float = param(0.0, "Magic Formula E_x", lo=-10.0, hi=0.99,
                                                unit="1")
+    tyre_relaxation_peak_over_radius: float = param(
+        1.2, "p_Ty1: peak lateral relaxation length over the wheel radius (0: no lag)",
+        lo=0.0, hi=10.0, unit="1",
+    )
+    tyre_relaxation_load_factor: float = param(
+        2.5, "p_Ty2: the relaxation length peaks at F_z = p_Ty2 F_z0", lo=0.2, hi=10.0, unit="1"
+    )
     slip_speed_min_mps: float = param(
         2.5, "floor of the slip denominators max(|v_x|, v_min)", lo=0.1, hi=10.0, unit="m/s"
     )
@@ -249,6 +277,17 @@ class VehicleParams:
             float(cornering_stiffness(loads[Wheel.FL], self.tyre("front"))),
             float(cornering_stiffness(loads[Wheel.RL], self.tyre("rear"))),
         )
+
+    def relaxation_length_m(self, fz_n: np.ndarray | float) -> np.ndarray:
+        """Lateral relaxation length σ (m) at wheel load ``fz_n`` (N), MF 5.2 σ_α0 floored at
+        :data:`SIGMA_MIN_M`; 0 where the lag is off (p_Ty1 = 0)."""
+        if self.tyre_relaxation_peak_over_radius == 0.0:
+            return np.zeros_like(np.asarray(fz_n, dtype=float))
+        sigma = (self.tyre_relaxation_peak_over_radius * self.wheel_radius_m
+                 * np.sin(2.0 * np.arctan(np.asarray(fz_n, dtype=float)
+                                          / (self.tyre_relaxation_load_factor
+                                             * self.tyre_nominal_load_n))))
+        return np.maximum(sigma, SIGMA_MIN_M)
 
     def understeer_gradient(self) -> float:
         """K_us = m/L (b/(2C_f) − a/(2C_r)) of the linear single-track model, rad/(m/s²)."""
@@ -356,6 +395,8 @@ class TwoTrackModel:
             1.0 / p.steer_rear_time_constant_s, lim.max_steer_rate_rear_rad_s,
             1.0 / p.load_transfer_time_constant_s,
         )
+        self._relax = (p.tyre_relaxation_peak_over_radius * p.wheel_radius_m,
+                       1.0 / (p.tyre_relaxation_load_factor * p.tyre_nominal_load_n))
         self._kf = front.scalar_constants(front.cornering_coeff)
         self._kr = rear.scalar_constants(rear.cornering_coeff)
 
@@ -373,11 +414,12 @@ class TwoTrackModel:
          k_aero, f_rr, inv_v_rr, v_min, two_tau, inv_two_tau2, inv_tau_f, rate_f, inv_tau_r,
          rate_r, inv_tau_lt) = self._c
         (vx, vy, r, _x, _y, yaw, w0, w1, w2, w3, t0, t1, t2, t3, dt0, dt1, dt2, dt3,
-         df, dr, axf, ayf) = y
+         df, dr, axf, ayf, al0, al1, al2, al3) = y
         df_cmd, dr_cmd, tc0, tc1, tc2, tc3 = u
         mu0, mu1, mu2, mu3 = mu
         forces = _tyre_forces
         kf, kr = self._kf, self._kr
+        atan = math.atan
 
         dlong = k_long * axf
         fzf, fzr = fz_f0 - dlong, fz_r0 + dlong
@@ -387,15 +429,37 @@ class TwoTrackModel:
         fz2 = max(fzr - dlr, 0.0)
         fz3 = max(fzr + dlr, 0.0)
 
+        # wheel-frame contact velocities, slip denominators and slip angles (tyre.slips)
         cf, sf = math.cos(df), math.sin(df)
         cr, sr = math.cos(dr), math.sin(dr)
         vyf, vyr = vy + a * r, vy - b * r
         vxl, vxr = vx - hf * r, vx + hf * r
-        fx0, fy0 = forces(vxl * cf + vyf * sf, vyf * cf - vxl * sf, w0 * rad, fz0, mu0, v_min, kf)
-        fx1, fy1 = forces(vxr * cf + vyf * sf, vyf * cf - vxr * sf, w1 * rad, fz1, mu1, v_min, kf)
+        vx0, vy0 = vxl * cf + vyf * sf, vyf * cf - vxl * sf
+        vx1, vy1 = vxr * cf + vyf * sf, vyf * cf - vxr * sf
         vxl, vxr = vx - hr * r, vx + hr * r
-        fx2, fy2 = forces(vxl * cr + vyr * sr, vyr * cr - vxl * sr, w2 * rad, fz2, mu2, v_min, kr)
-        fx3, fy3 = forces(vxr * cr + vyr * sr, vyr * cr - vxr * sr, w3 * rad, fz3, mu3, v_min, kr)
+        vx2, vy2 = vxl * cr + vyr * sr, vyr * cr - vxl * sr
+        vx3, vy3 = vxr * cr + vyr * sr, vyr * cr - vxr * sr
+        n0 = vx0 if vx0 > v_min else (-vx0 if -vx0 > v_min else v_min)
+        n1 = vx1 if vx1 > v_min else (-vx1 if -vx1 > v_min else v_min)
+        n2 = vx2 if vx2 > v_min else (-vx2 if -vx2 > v_min else v_min)
+        n3 = vx3 if vx3 > v_min else (-vx3 if -vx3 > v_min else v_min)
+        a0, a1, a2, a3 = -atan(vy0 / n0), -atan(vy1 / n1), -atan(vy2 / n2), -atan(vy3 / n3)
+        s_peak, inv_fz_s = self._relax
+        if s_peak > 0.0:
+            s0 = max(s_peak * math.sin(2.0 * atan(fz0 * inv_fz_s)), SIGMA_MIN_M)
+            s1 = max(s_peak * math.sin(2.0 * atan(fz1 * inv_fz_s)), SIGMA_MIN_M)
+            s2 = max(s_peak * math.sin(2.0 * atan(fz2 * inv_fz_s)), SIGMA_MIN_M)
+            s3 = max(s_peak * math.sin(2.0 * atan(fz3 * inv_fz_s)), SIGMA_MIN_M)
+            dal = ((a0 - al0) * n0 / s0, (a1 - al1) * n1 / s1,
+                   (a2 - al2) * n2 / s2, (a3 - al3) * n3 / s3)
+            u0, u1, u2, u3 = al0, al1, al2, al3
+        else:
+            dal = (0.0, 0.0, 0.0, 0.0)
+            u0, u1, u2, u3 = a0, a1, a2, a3
+        fx0, fy0 = forces(vx0, n0, u0, w0 * rad, fz0, mu0, kf)
+        fx1, fy1 = forces(vx1, n1, u1, w1 * rad, fz1, mu1, kf)
+        fx2, fy2 = forces(vx2, n2, u2, w2 * rad, fz2, mu2, kr)
+        fx3, fy3 = forces(vx3, n3, u3, w3 * rad, fz3, mu3, kr)
 
         fxb_f0, fxb_f1 = fx0 * cf - fy0 * sf, fx1 * cf - fy1 * sf
         fyb_f = (fx0 + fx1) * sf + (fy0 + fy1) * cf
@@ -419,6 +483,7 @@ class TwoTrackModel:
             info["fz"] = (fz0, fz1, fz2, fz3)
             info["ax"] = ax
             info["ay"] = ay
+            info["alpha"] = (a0, a1, a2, a3)
         return [
             ax + vy * r,
             ay - vx * r,
@@ -439,25 +504,27 @@ class TwoTrackModel:
             ddr,
             (ax - axf) * inv_tau_lt,
             (ay - ayf) * inv_tau_lt,
+            *dal,
         ]
 
 
 def _tyre_forces(
-    vxw: float, vyw: float, omega_r: float, fz: float, mu: float, v_min: float,
+    vxw: float, den: float, alpha: float, omega_r: float, fz: float, mu: float,
     k: tuple[float, ...],
 ) -> tuple[float, float]:
-    """Slips (tyre.py definitions) and combined-slip forces of one wheel, plain floats;
-    inlined copy of :func:`fourws_sim.core.tyre.forces_scalar` (tested equal)."""
+    """Combined-slip forces of one wheel in plain floats from its wheel-frame forward
+    velocity ``vxw``, slip denominator ``den`` = max(|vxw|, v_min), slip angle ``alpha``
+    (rad, tyre.slips sign) and rim speed ``omega_r``; inlined copy of
+    :func:`fourws_sim.core.tyre.forces_scalar` (tested equal)."""
     ky1_fz0, inv_ky2_fz0, p_d2, inv_fz0, c_kx, cy, ey, uy, cx, ex, ux = k
     lam = 1.0 + p_d2 * (fz * inv_fz0 - 1.0)
     lam = 1.0 if lam > 1.0 else (0.1 if lam < 0.1 else lam)
     d = mu * fz * lam
     if d <= 0.0:
         return 0.0, 0.0
-    den = vxw if vxw > v_min else (-vxw if -vxw > v_min else v_min)
     k_a = ky1_fz0 * math.sin(2.0 * math.atan(fz * inv_ky2_fz0))
     sx = (omega_r - vxw) / den * c_kx * fz / (ux * cx * d)
-    sy = -math.atan(vyw / den) * k_a / (uy * cy * d)
+    sy = alpha * k_a / (uy * cy * d)
     rho = math.sqrt(sx * sx + sy * sy)
     if rho < 1e-12:
         return d * sx * cx * ux, d * sy * cy * uy
