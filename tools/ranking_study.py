@@ -27,8 +27,10 @@ PAPER = ["dlc_60_mu05", "dlc_90_mu06"]
 
 
 def cases() -> list[tuple[str, str, str, dict]]:
-    """(group, label, scenario, MPC overrides), relative to the shipped fourws_mpc/mpc.yaml."""
+    """(group, label, scenario, overrides): MPC overrides relative to the shipped
+    fourws_mpc/mpc.yaml; the key ``vehicle`` holds plant overrides over vehicle.yaml."""
     from fourws_bringup.core.closed_loop import load_mpc_config
+    from fourws_sim.core.vehicle import load_vehicle_params
 
     cfg = load_mpc_config("improved", None)
     S_Y, S_PHI = cfg.scale_y_m, cfg.scale_phi_deg  # noqa: N806
@@ -48,17 +50,43 @@ def cases() -> list[tuple[str, str, str, dict]]:
             out.append(("mismatch", label, sc, ov))
     for sc in ("iso3888_80_mu08", "mu_step", "split_mu", "sine_50_mu08"):
         out.append(("scenarios", "shipped", sc, {}))
+    p_ty1 = load_vehicle_params().tyre_relaxation_peak_over_radius
+    for f in (0.0, 0.5, 1.0, 2.0):
+        for sc in PAPER:
+            out.append(("relaxation", f"p_Ty1 x{f:g}", sc,
+                        {"vehicle": {"tyre_relaxation_peak_over_radius": f * p_ty1}}))
     return out
 
 
+def scenario_with_vehicle(name: str, vehicle: dict, folder: Path) -> str:
+    """Path of a copy of the shipped scenario ``name`` with ``vehicle`` merged over its own
+    vehicle overrides."""
+    import yaml
+
+    from fourws_sim.core.scenario import scenarios_dir
+
+    data = yaml.safe_load((scenarios_dir() / f"{name}.yaml").read_text(encoding="utf-8"))
+    data["vehicle"] = {**(data.get("vehicle") or {}), **vehicle}
+    tag = "_".join(f"{k}-{v:g}" for k, v in sorted(vehicle.items()))
+    path = folder / f"{name}__{tag}.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return str(path)
+
+
 def run_one(job: tuple[str, str, str, dict, str]) -> dict:
+    import tempfile
+
     from fourws_bringup.core.closed_loop import run_closed_loop
 
     group, label, scenario, overrides, preset = job
     row = {"group": group, "case": label, "scenario": scenario, "controller": preset,
            "overrides": overrides}
+    mpc = {k: v for k, v in overrides.items() if k != "vehicle"}
     try:
-        log = run_closed_loop(scenario, preset, mpc_overrides=overrides or None)
+        with tempfile.TemporaryDirectory() as tmp:
+            source = (scenario_with_vehicle(scenario, overrides["vehicle"], Path(tmp))
+                      if "vehicle" in overrides else scenario)
+            log = run_closed_loop(source, preset, mpc_overrides=mpc or None)
     except Exception as exc:  # noqa: BLE001 - a failed case is a result, recorded as such
         row["error"] = f"{type(exc).__name__}: {exc}"
         return row
@@ -87,7 +115,7 @@ def markdown(rows: list[dict]) -> str:
              "separate\".", "",
              "Max |eY| / RMSE eY in mm. Cells marked (aborted) hit the plant's abort limits.",
              ""]
-    for group in ("scaling", "mismatch", "scenarios"):
+    for group in ("relaxation", "scaling", "mismatch", "scenarios"):
         sel = [r for r in rows if r["group"] == group]
         keys = list(dict.fromkeys((r["case"], r["scenario"]) for r in sel))
         lines += [f"### {group}", "", "| case | scenario | " + " | ".join(PRESETS) + " |",

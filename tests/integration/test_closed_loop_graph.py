@@ -2,8 +2,10 @@
 
 One module-scoped set of lockstep runs of the paper's 60 km/h, μ = 0.5 lane change
 (mpc_fws, mpc_4ws, improved) is shared by the tests below:
-- every preset completes and tracks within the paper's error scale, and max |β| ranks as
-  the paper's: improved < mpc_4ws < mpc_fws;
+- the lateral error ranks as Tables 6-7 (improved < mpc_4ws < mpc_fws on max and RMSE eY):
+  on the plant's tyres with relaxation length the fixed-weight presets over-drive the
+  steering (mpc_fws diverges and is aborted, its bag kept); improved stays under the
+  paper's 0.089 m;
 - the graph is the in-process closed loop (``fourws_bringup.core.closed_loop``) distributed
   over processes: recorded states and commands equal the in-process ones to 1e-9;
 - replaying the recorded /vehicle/state and /reference/trajectory into a fresh mpc_node in
@@ -46,22 +48,26 @@ def runs(tmp_path_factory):
     return out
 
 
-def test_every_run_completes_and_is_recorded(runs):
+def test_every_run_is_recorded_whole_and_the_4ws_presets_complete(runs):
     for c, (folder, m) in runs.items():
         assert json.loads((folder / "metrics.json").read_text()) == m
-        assert m["completed"], (c, m["reason"])
-        assert m["steps"] > 900 and m["real_time_factor"] > 0 and m["reason"], c
+        assert m["real_time_factor"] > 0 and m["reason"], c
         assert m["missing_steps"] == 0, (c, "the recorder lost steps")
+        assert (folder / "bag" / "metadata.yaml").is_file(), c
+    for c in ("improved", "mpc_4ws"):
+        assert runs[c][1]["completed"] and runs[c][1]["steps"] > 900, (c, runs[c][1]["reason"])
 
 
-def test_controllers_track_and_rank_on_sideslip_over_topics(runs):
-    """Every preset tracks within the paper's error scale; max |β| ranks as the paper's
-    (improved < mpc_4ws < mpc_fws). Lateral errors are all within the path's 2 mm initial
-    offset on our plant and do not rank (README, "Results")."""
+def test_controllers_rank_as_tables_6_7_over_topics(runs):
+    """max and RMSE |eY| rank improved < mpc_4ws < mpc_fws, each step beyond the 0.5 mm tie
+    (an aborted run ranks last); improved is within the paper's 0.089 m; max |β| of the two
+    4WS presets ranks as the paper's (improved < mpc_4ws)."""
     m = {c: runs[c][1] for c in CONTROLLERS}
-    for c in CONTROLLERS:
-        assert m[c]["max_abs_lateral_error_m"] < 0.15, (c, m[c])
-    assert rank(m, "max_abs_sideslip_deg") == ["improved", "mpc_4ws", "mpc_fws"], m
+    assert m["improved"]["max_abs_lateral_error_m"] < 0.089, m["improved"]
+    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):
+        assert rank(m, key) == ["improved", "mpc_4ws", "mpc_fws"], (key, m)
+        assert m["improved"][key] + 5e-4 < m["mpc_4ws"][key], (key, m)
+    assert m["improved"]["max_abs_sideslip_deg"] < m["mpc_4ws"]["max_abs_sideslip_deg"]
 
 
 def test_graph_reproduces_the_in_process_closed_loop(runs):

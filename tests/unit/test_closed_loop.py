@@ -10,37 +10,44 @@ from fourws_bringup.core.closed_loop import run_closed_loop
 from fourws_common.resources import config_dir
 
 
-@pytest.mark.slow
-def test_paper_presets_track_and_rank_on_sideslip_as_the_paper():
-    """dlc_60_mu05, one cost scaling for all presets (docs/mpc.md): every preset completes the
-    lane change within the paper's error scale, and the sideslip ranks as the paper reports
-    it (max |β|: MPC-4WS 1.12°, Improved 0.40°; rear steer is there to cut sideslip):
-    improved < mpc_4ws < mpc_fws. On our plant the lateral errors of the three are all within
-    the path's 2 mm initial offset, so they do not rank (README, "Results")."""
-    logs = {c: run_closed_loop("dlc_60_mu05", c) for c in ("improved", "mpc_4ws", "mpc_fws")}
-    m = {c: log.metrics() for c, log in logs.items()}
-    for c, log in logs.items():
-        assert log.completed, (c, log.reason)
-        assert m[c]["max_abs_lateral_error_m"] < 0.089, (c, m[c])
-    beta = {c: m[c]["max_abs_sideslip_deg"] for c in m}
-    assert beta["improved"] < beta["mpc_4ws"] < beta["mpc_fws"], beta
+def _without_relaxation(tmp_path: Path, name: str) -> str:
+    """The scenario with the plant's tyre relaxation turned off (p_Ty1 = 0)."""
+    sc = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / f"{name}.yaml").read_text(
+        encoding="utf-8"))
+    sc["name"] = f"{name}_no_relaxation"
+    sc["vehicle"] = {**(sc.get("vehicle") or {}), "tyre_relaxation_peak_over_radius": 0.0}
+    path = tmp_path / f"{name}_no_relaxation.yaml"
+    path.write_text(yaml.safe_dump(sc), encoding="utf-8")
+    return str(path)
+
+
+def _order_ok(m: dict, key: str) -> bool:
+    """improved < mpc_4ws < mpc_fws on ``key``, each step beyond 0.5 mm; an aborted run last."""
+    e = {c: (m[c][key] if m[c]["completed"] else np.inf) for c in m}
+    return e["improved"] + 5e-4 < e["mpc_4ws"] and e["mpc_4ws"] + 5e-4 < e["mpc_fws"]
 
 
 @pytest.mark.slow
-def test_tables_6_7_lateral_ranking_holds_where_tracking_outweighs_the_input_penalty():
-    """The study of docs/ranking-study.md, at one of its points: with the output sizes of the
-    cost scaling at 0.3 x the equal-effect ones (tracking weighted 11x more), the fixed-weight
-    presets, whose input penalty is 37x lighter than the fuzzy centre rule's, over-drive the
-    steering and the paper's order appears on dlc_60_mu05 (improved < mpc_4ws < mpc_fws on
-    max and RMSE lateral error, each step well over the 0.5 mm tie); at the shipped scaling
-    (k = 1) the three tie within the path's 2 mm initial offset."""
-    scaled = {"scale_y_m": 0.3 * 0.0059, "scale_phi_deg": 0.3 * 0.30}
-    m = {c: run_closed_loop("dlc_60_mu05", c, mpc_overrides=scaled).metrics()
-         for c in ("improved", "mpc_4ws", "mpc_fws")}
-    assert all(m[c]["completed"] for c in m), m
+@pytest.mark.parametrize("scenario", ["dlc_60_mu05", "dlc_90_mu06"])
+def test_tables_6_7_lateral_ranking_comes_from_the_unmodelled_tyre_lag(scenario, tmp_path):
+    """One cost scaling for all presets (docs/mpc.md). On the plant's tyres, whose lateral
+    force lags the slip angle over the relaxation length (13 ms at 60 km/h), the lateral error
+    ranks as Tables 6-7 (improved < mpc_4ws < mpc_fws on max and RMSE eY) and improved stays
+    within the paper's 0.089 m: the fixed weights' 37x lighter input penalty over-drives the
+    steering against a lag eq. (1) does not contain. The same runs with the lag off tie
+    within 0.5 mm: the separation is the lag's, not the path's."""
+    presets = ("improved", "mpc_4ws", "mpc_fws")
+    m = {c: run_closed_loop(scenario, c).metrics() for c in presets}
+    assert m["improved"]["completed"] and m["mpc_4ws"]["completed"], m
+    assert m["improved"]["max_abs_lateral_error_m"] < 0.089, m["improved"]
     for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):
-        e = {c: m[c][key] for c in m}
-        assert e["improved"] + 5e-4 < e["mpc_4ws"] and e["mpc_4ws"] + 5e-4 < e["mpc_fws"], e
+        assert _order_ok(m, key), (key, m)
+    assert m["improved"]["max_abs_sideslip_deg"] < m["mpc_4ws"]["max_abs_sideslip_deg"]
+    path = _without_relaxation(tmp_path, scenario)
+    off = {c: run_closed_loop(path, c).metrics() for c in presets}
+    e = [off[c]["max_abs_lateral_error_m"] for c in presets]
+    assert all(off[c]["completed"] for c in presets), off
+    assert max(e) - min(e) < 5e-4, e
 
 
 @pytest.mark.slow
