@@ -204,3 +204,21 @@ def test_recorder_refuses_a_non_empty_output_folder_naming_the_parameter(graph, 
     assert info.value.returncode == 2
     assert any("output_dir" in line and str(out) in line for line in info.value.last_lines)
     assert (out / "old.mcap").read_bytes() == b"x"
+
+
+def test_start_gate_subscribes_to_the_state_only_once_the_commands_are_matched(
+        graph, ros, tmp_path):
+    """With start_gate_topic = /vehicle/state the recorder subscribes to the state (which a
+    lockstep plant waits for) only after a /control/mpc_command publisher has matched, so a
+    lockstep graph cannot start before the recorder takes the MPC's first command."""
+    out = tmp_path / "gated"
+    state_pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    graph([recorder(out, topics="[/vehicle/state,/control/mpc_command]",
+                    start_gate_topic="/vehicle/state", start_gate_timeout_s=60.0)])
+    time.sleep(2.0)
+    ros.spin_until(lambda: False, 1.0)
+    assert state_pub.get_subscription_count() == 0, "subscribed before the command matched"
+    cmd_pub = ros.node.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+    assert ros.spin_until(lambda: state_pub.get_subscription_count() == 1, 30.0), \
+        "the gate never opened"
+    assert cmd_pub.get_subscription_count() == 1

@@ -11,6 +11,13 @@ messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten
 counts that are on disk, so a killed recorder loses at most the open chunk and leaves a
 recognisable bag (``fourws bag recover`` makes its MCAP whole again).
 
+Start gate (``start_gate_topic``, set by ``fourws run`` to ``/vehicle/state``): that topic
+is subscribed to last, once every other recorded per-step topic has a matched publisher (or
+after ``start_gate_timeout_s``, with a warning naming the unmatched ones). A lockstep plant
+holds its first state until /vehicle/state has all its subscribers, so the graph does not
+start before the recorder can take every node's first message; without the gate a recorder
+that discovered the MPC late lost its first commands (35 steps on a slow machine).
+
 Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
 arrived for ``drain_quiet_s`` (at most ``drain_max_s``), then ends, and ``destroy_node``
 finalises the file (last chunk, summary, footer) and writes the final ``metadata.yaml``,
@@ -50,10 +57,18 @@ class RecorderConfig:
                                  "for this long", lo=0.0, hi=10.0, unit="s")
     drain_max_s: float = param(2.0, "after a stop request, end after this long at most",
                                lo=0.0, hi=60.0, unit="s")
+    start_gate_topic: str = param("", "subscribe to this recorded topic only once every other "
+                                  "per-step topic has a matched publisher (empty: all at once)")
+    start_gate_timeout_s: float = param(10.0, "subscribe to start_gate_topic after this long "
+                                        "even if some publisher is missing", lo=0.0, hi=300.0,
+                                        unit="s")
 
     def __post_init__(self) -> None:
         if not self.output_dir:
             raise ValueError("output_dir: must be set to the bag folder to create")
+        if self.start_gate_topic and not self.start_gate_topic.startswith("/"):
+            raise ValueError(f"start_gate_topic: expected an absolute topic name, got "
+                             f"{self.start_gate_topic!r}")
         if self.drain_quiet_s > self.drain_max_s:
             raise ValueError(f"drain_quiet_s ({self.drain_quiet_s}) must not exceed "
                              f"drain_max_s ({self.drain_max_s})")
@@ -134,21 +149,57 @@ class RecorderNode(Node):
         self.received = 0
         self._last_rx = time.monotonic()
         self.lost: dict[str, int] = {}
+        self.matched: dict[str, int] = {}
+        gate = cfg.start_gate_topic
+        if gate and gate not in names:
+            raise ValueError(f"start_gate_topic: {gate} is not among the recorded topics")
+        self._gate_waits = [i.name for i in infos if i.name != gate
+                            and TOPICS.get(i.name, ("", "control"))[1] == "control"]
+        self._pending_gate = next((i for i in infos if i.name == gate), None)
+        self._profiles, self._classes = profiles, classes
+        self._started_at = time.monotonic()
         for info in infos:
-            self.create_subscription(
-                classes[info.name], info.name, self._callback(info.name), profiles[info.name],
-                raw=True, event_callbacks=SubscriptionEventCallbacks(
-                    message_lost=self._lost_callback(info.name)))
+            if info is not self._pending_gate:
+                self._subscribe(info.name)
         self.create_timer(0.05, self._check_stop)
         self.get_logger().info(
             f"recording {len(infos)} topics to {self.writer.path} (chunks of "
             f"{cfg.chunk_size_bytes} bytes, {cfg.compression}): {', '.join(names)}")
 
+    def _subscribe(self, topic: str) -> None:
+        def on_matched(info) -> None:
+            self.matched[topic] = int(info.current_count)
+
+        self.create_subscription(
+            self._classes[topic], topic, self._callback(topic), self._profiles[topic],
+            raw=True, event_callbacks=SubscriptionEventCallbacks(
+                message_lost=self._lost_callback(topic), matched=on_matched))
+
+    def _check_gate(self) -> None:
+        """Subscribe to the gate topic once every per-step topic has a publisher matched."""
+        if self._pending_gate is None:
+            return
+        missing = [t for t in self._gate_waits if self.matched.get(t, 0) < 1]
+        waited = time.monotonic() - self._started_at
+        if missing and waited < self.params.config.start_gate_timeout_s:
+            return
+        topic = self._pending_gate.name
+        self._pending_gate = None
+        if missing:
+            self.get_logger().warning(
+                f"no publisher matched on {', '.join(missing)} after {waited:.1f} s: "
+                f"subscribing to {topic} anyway; their first messages may be missing")
+        else:
+            self.get_logger().info(f"every per-step publisher matched after {waited:.2f} s: "
+                                   f"subscribing to {topic}")
+        self._subscribe(topic)
+
     def _reject_runtime_change(self, params):
         from rcl_interfaces.msg import SetParametersResult
 
         names = [p.name for p in params]
-        if any(n in ("topics", "output_dir", "chunk_size_bytes", "compression") for n in names):
+        if any(n in ("topics", "output_dir", "chunk_size_bytes", "compression",
+                     "start_gate_topic", "start_gate_timeout_s") for n in names):
             return SetParametersResult(successful=False, reason="recorder parameters "
                                        f"{names} apply at start only")
         return SetParametersResult(successful=True)
@@ -180,6 +231,7 @@ class RecorderNode(Node):
             self.done = True  # a second signal: stop draining
 
     def _check_stop(self) -> None:
+        self._check_gate()
         if self._stop_requested_at is None or self.done:
             return
         cfg = self.params.config
