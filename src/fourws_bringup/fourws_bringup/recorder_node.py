@@ -11,12 +11,14 @@ messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten
 counts that are on disk, so a killed recorder loses at most the open chunk and leaves a
 recognisable bag (``fourws bag recover`` makes its MCAP whole again).
 
-Start gate (``start_gate_topic``, set by ``fourws run`` to ``/vehicle/state``): that topic
-is subscribed to last, once every other recorded per-step topic has a matched publisher (or
-after ``start_gate_timeout_s``, with a warning naming the unmatched ones). A lockstep plant
-holds its first state until /vehicle/state has all its subscribers, so the graph does not
-start before the recorder can take every node's first message; without the gate a recorder
-that discovered the MPC late lost its first commands (35 steps on a slow machine).
+Start gate (``start_gate_topic``, /vehicle/state in recorder.yaml): that topic is
+subscribed to last, once every other recorded per-step topic has a matched publisher and
+``start_gate_settle_s`` more has passed (the recorder sees a match before the publisher has
+matched it back), or after ``start_gate_timeout_s`` with a warning naming the unmatched
+topics. A lockstep plant holds its first state until /vehicle/state has all its
+subscribers, so the graph cannot start before the recorder takes every node's first
+message. Measured on a slow machine: without the gate a bag lost the MPC's first 35
+commands, with the gate and no settle time its first 4.
 
 Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
 arrived for ``drain_quiet_s`` (at most ``drain_max_s``), then ends, and ``destroy_node``
@@ -59,6 +61,9 @@ class RecorderConfig:
                                lo=0.0, hi=60.0, unit="s")
     start_gate_topic: str = param("", "subscribe to this recorded topic only once every other "
                                   "per-step topic has a matched publisher (empty: all at once)")
+    start_gate_settle_s: float = param(0.5, "after the last per-step publisher matched, wait "
+                                       "this long before subscribing to start_gate_topic",
+                                       lo=0.0, hi=10.0, unit="s")
     start_gate_timeout_s: float = param(10.0, "subscribe to start_gate_topic after this long "
                                         "even if some publisher is missing", lo=0.0, hi=300.0,
                                         unit="s")
@@ -158,6 +163,7 @@ class RecorderNode(Node):
         self._pending_gate = next((i for i in infos if i.name == gate), None)
         self._profiles, self._classes = profiles, classes
         self._started_at = time.monotonic()
+        self._all_matched_at: float | None = None
         for info in infos:
             if info is not self._pending_gate:
                 self._subscribe(info.name)
@@ -179,10 +185,17 @@ class RecorderNode(Node):
         """Subscribe to the gate topic once every per-step topic has a publisher matched."""
         if self._pending_gate is None:
             return
+        cfg = self.params.config
+        now = time.monotonic()
         missing = [t for t in self._gate_waits if self.matched.get(t, 0) < 1]
-        waited = time.monotonic() - self._started_at
-        if missing and waited < self.params.config.start_gate_timeout_s:
+        waited = now - self._started_at
+        if missing and waited < cfg.start_gate_timeout_s:
             return
+        if not missing:
+            if self._all_matched_at is None:
+                self._all_matched_at = now
+            if now - self._all_matched_at < cfg.start_gate_settle_s:
+                return
         topic = self._pending_gate.name
         self._pending_gate = None
         if missing:
@@ -199,7 +212,8 @@ class RecorderNode(Node):
 
         names = [p.name for p in params]
         if any(n in ("topics", "output_dir", "chunk_size_bytes", "compression",
-                     "start_gate_topic", "start_gate_timeout_s") for n in names):
+                     "start_gate_topic", "start_gate_settle_s", "start_gate_timeout_s")
+               for n in names):
             return SetParametersResult(successful=False, reason="recorder parameters "
                                        f"{names} apply at start only")
         return SetParametersResult(successful=True)
