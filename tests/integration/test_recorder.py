@@ -200,7 +200,13 @@ def test_recorder_refuses_a_non_empty_output_folder_naming_the_parameter(graph, 
     out.mkdir()
     (out / "old.mcap").write_bytes(b"x")
     with pytest.raises(NodeDied) as info:
-        graph([recorder(out)])
+        # The node can show in the graph before its constructor rejects the folder: the
+        # supervisor's start then returns, and the death is seen by the next check.
+        sup = graph([recorder(out)])
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            sup.check()
+            time.sleep(0.05)
     assert info.value.returncode == 2
     assert any("output_dir" in line and str(out) in line for line in info.value.last_lines)
     assert (out / "old.mcap").read_bytes() == b"x"
