@@ -11,7 +11,7 @@ messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten
 counts that are on disk, so a killed recorder loses at most the open chunk and leaves a
 recognisable bag (``fourws bag recover`` makes its MCAP whole again).
 
-Start gate (``start_gate_topic``, /vehicle/state in recorder.yaml): that topic is
+Start gate (``start_gate_topic``, /vehicle/state in ``fourws run``): that topic is
 subscribed to last, once every other recorded per-step topic has a matched publisher and
 ``start_gate_settle_s`` more has passed (the recorder sees a match before the publisher has
 matched it back), or after ``start_gate_timeout_s`` with a warning naming the unmatched

@@ -82,7 +82,8 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     if bag_dir is not None:
         specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
                               params_files=[str(config_dir("fourws_bringup") / "recorder.yaml")],
-                              parameters={"output_dir": str(bag_dir)}))
+                              parameters={"output_dir": str(bag_dir),
+                                          "start_gate_topic": "/vehicle/state"}))
     return specs
 
 
