@@ -36,7 +36,8 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
                                                                          scenario_file):
     graph([NodeSpec("plant_node", "fourws_sim", "plant_node",
                     params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
-                    parameters={"scenario": str(scenario_file), "wait_for_subscribers": 1})])
+                    parameters={"scenario": str(scenario_file), "wait_for_subscribers": 1,
+                                "status_period_s": 0.05})])
     states: dict[int, VehicleState] = {}
     status: list[dict] = []
     refs: list[ReferenceTrajectory] = []
@@ -63,6 +64,14 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     end = status[-1]
     assert end["completed"], end
     assert end["steps"] == 100 and end["rejected_commands"] >= 1
+    # heartbeats while running: progress in steps, simulated and wall time (the runner's
+    # progress line and nothing else per step)
+    beats = [s for s in status if s["state"] == "running" and s["wall_time_s"] is not None]
+    if end["wall_time_s"] > 0.15:
+        assert beats, status
+    for a, b in zip(beats, beats[1:] + [end]):
+        assert a["steps"] <= b["steps"] and a["wall_time_s"] <= b["wall_time_s"]
+        assert a["sim_time_s"] == pytest.approx(a["steps"] * 0.01)
     assert sorted(states) == list(range(101)), "every step 0..100 published once at least"
     for msg in states.values():
         vals = [getattr(msg, k) for k in ("x", "y", "yaw", "vx", "vy", "yaw_rate", "ay")]

@@ -82,6 +82,31 @@ def test_bad_scenarios_raise_naming_the_key(change, match):
         scenario_from_mapping(raw)
 
 
+def test_on_path_start_puts_the_car_on_the_reference_with_its_heading():
+    """The tanh path is dy1/2 (1 + tanh z1) ≈ 1.98 mm off Y = 0 at X = 0 (z1 ≈ −3.81): a car at
+    the origin would start with that lateral error; on_path starts it on the path."""
+    raw = _raw("dlc_60_mu05")
+    assert raw["initial"]["on_path"] is True
+    s = scenario_from_mapping(raw)
+    z1, z2 = 2.4 / 25.0 * (0.0 - 27.19) - 1.2, 2.4 / 21.95 * (0.0 - 56.46) - 1.2
+    y_ref = 4.05 / 2 * (1 + math.tanh(z1)) - 5.7 / 2 * (1 + math.tanh(z2))
+    assert s.initial.y == pytest.approx(y_ref, rel=1e-6)
+    i0 = int(np.argmin(np.abs(s.path.x)))
+    assert s.initial.x == 0.0 and s.initial.yaw == float(s.path.yaw[i0]) > 0.0
+    out = Simulator.from_scenario(s).outputs()
+    assert abs(lateral_error(s.path, out.x, out.y)) < 1e-12
+    assert lateral_error(s.path, 0.0, 0.0) == pytest.approx(-s.initial.y, rel=1e-6)
+
+
+@pytest.mark.parametrize("initial, match", [({"on_path": True, "yaw_deg": 1.0}, "yaw_deg"),
+                                            ({"on_path": "yes"}, "on_path")])
+def test_on_path_start_rejects_contradictions(initial, match):
+    raw = _raw("dlc_60_mu05")
+    raw["initial"] = initial
+    with pytest.raises(ValueError, match=match):
+        scenario_from_mapping(raw)
+
+
 def test_needs_an_end():
     raw = _raw("dlc_60_mu05")
     del raw["end_x_m"], raw["duration_s"]

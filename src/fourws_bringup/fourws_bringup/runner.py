@@ -98,14 +98,15 @@ class RunOutcome:
 
 
 class _Monitor:
-    """A small rclpy node in the run's domain: /clock for progress, /run/status for the end."""
+    """A small rclpy node in the run's domain that reads the plant's /run/status: progress
+    from its heartbeats, the end and the plant's own wall time from its last message. It
+    takes no per-step topic, so watching a run costs the graph nothing per step."""
 
     def __init__(self, domain_id: int) -> None:
         import rclpy
-        from rosgraph_msgs.msg import Clock
         from std_msgs.msg import String
 
-        from fourws_common.qos import CLOCK_QOS, LATCHED_QOS
+        from fourws_common.qos import LATCHED_QOS
 
         self._rclpy = rclpy
         self.ctx = rclpy.Context()
@@ -113,30 +114,29 @@ class _Monitor:
         self.node = rclpy.create_node(f"fourws_run_monitor_{id(self)}", context=self.ctx,
                                       start_parameter_services=False)
         self.sim_time_s = 0.0
-        self.first_clock_wall: float | None = None
-        self.first_clock_sim_s = 0.0
+        self.wall_time_s: float | None = None  # the plant's, from its first state
         self.ended_wall: float | None = None
         self.status: dict = {}
-        self.node.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
         self.node.create_subscription(String, "/run/status", self._on_status, LATCHED_QOS)
         from rclpy.experimental import EventsExecutor
 
-        # The nodes' executor (fourws_common.node_main); /clock arrives at 100 Hz x the RTF.
         self.ex = EventsExecutor(context=self.ctx)
         self.ex.add_node(self.node)
 
-    def _on_clock(self, msg) -> None:
-        self.sim_time_s = msg.clock.sec + msg.clock.nanosec * 1e-9
-        if self.first_clock_wall is None:
-            # /clock may match after the plant started: rate from the ticks seen here.
-            self.first_clock_wall, self.first_clock_sim_s = time.monotonic(), self.sim_time_s
-
     def _on_status(self, msg) -> None:
         try:
-            self.status = json.loads(msg.data)
+            status = json.loads(msg.data)
         except ValueError:
             return
-        if self.status.get("state") == "ended" and self.ended_wall is None:
+        if not isinstance(status, dict):
+            return
+        self.status = status
+        sim, wall = status.get("sim_time_s"), status.get("wall_time_s")
+        if isinstance(sim, int | float):
+            self.sim_time_s = float(sim)
+        if isinstance(wall, int | float):
+            self.wall_time_s = float(wall)
+        if status.get("state") == "ended" and self.ended_wall is None:
             self.ended_wall = time.monotonic()
 
     def spin(self, timeout_s: float) -> None:
@@ -160,16 +160,14 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
     died = None
     t0 = time.monotonic()
     try:
-        # The monitor exists before the nodes, so it sees the first /clock tick: wall time
-        # (and the real-time factor) count from the plant's first state to its end.
+        # Wall time and the real-time factor are the plant's own (/run/status): from its
+        # first state to its end, start-up excluded. t0 only bounds the run's duration.
         monitor = _Monitor(lease.domain_id)
         sup.start(timeout_s=60.0)
         t0 = time.monotonic()
         last_print = 0.0
         while True:
             monitor.spin(0.05)
-            if monitor.first_clock_wall is not None:
-                t0 = monitor.first_clock_wall
             exited = sup.exited()
             if "plant_node" in exited:
                 if exited["plant_node"] != 0:
@@ -182,9 +180,10 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
                 raise SupervisorError(f"run did not end within {timeout_s:.0f} s of wall time")
             if progress and now - last_print > 0.5:
                 last_print = now
-                rtf = (monitor.sim_time_s - monitor.first_clock_sim_s) / max(now - t0, 1e-9)
+                wall = monitor.wall_time_s or 0.0
+                rtf = monitor.sim_time_s / wall if wall > 0.0 else 0.0
                 stream.write(f"\r  {controller} on {scenario}: t_sim = {monitor.sim_time_s:6.2f} s"
-                             f"  wall {now - t0:6.1f} s  RTF {rtf:4.1f}   ")
+                             f"  wall {wall:6.1f} s  RTF {rtf:4.1f}   ")
                 stream.flush()
         plant_exit = time.monotonic()
         for _ in range(20):  # the final status is latched; give it a moment to arrive
@@ -192,7 +191,7 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
                 break
             monitor.spin(0.05)
         st = monitor.status
-        wall = max((monitor.ended_wall or plant_exit) - t0, 1e-3)
+        wall = monitor.wall_time_s or max((monitor.ended_wall or plant_exit) - t0, 1e-3)
         outcome = RunOutcome(bool(st.get("completed", False)),
                              str(st.get("reason", "plant ended without a status")), wall,
                              float(st.get("sim_time_s", monitor.sim_time_s)),

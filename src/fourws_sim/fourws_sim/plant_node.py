@@ -1,8 +1,10 @@
 """Plant node: runs the fourws_sim core as the vehicle on the ROS graph.
 
-Publishes ``/clock``, ``/vehicle/state``, ``/vehicle/odom`` every step and the scenario's
-``/reference/trajectory`` and ``/reference/path`` once (transient_local); subscribes
-``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``.
+Publishes ``/vehicle/state``, ``/clock``, ``/vehicle/odom`` every step (in that order: the
+state starts the control chain) and the scenario's ``/reference/trajectory`` and
+``/reference/path`` once (transient_local); ``/run/status`` (JSON: state, steps, simulated and
+wall time) at the start, every ``status_period_s`` of wall time while running, and at the end.
+Subscribes ``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``.
 
 Timing modes:
 - ``lockstep`` (default): publish the state for step k, wait until the MpcCommand and the
@@ -68,6 +70,8 @@ class PlantNodeConfig:
     wait_for_subscribers: int = param(0, "lockstep: hold the first state until /vehicle/state "
                                       "has this many subscribers (0: start at once)",
                                       lo=0, hi=100)
+    status_period_s: float = param(0.5, "publish a 'running' /run/status (steps, simulated "
+                                   "and wall time) this often", lo=0.05, hi=60.0, unit="s")
     path_pose_spacing_m: float = param(0.5, "spacing of poses in /reference/path",
                                        lo=0.05, hi=10.0, unit="m")
 
@@ -130,6 +134,7 @@ class PlantNode(Node):
             self.create_timer(cfg.dt_s, self._realtime_tick)
         else:
             self.create_timer(min(cfg.republish_period_s, 0.1), self._lockstep_watchdog)
+        self.create_timer(cfg.status_period_s, self._status_heartbeat)
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
@@ -219,6 +224,10 @@ class PlantNode(Node):
         ended, reason = self.scenario.check_end(self.outputs)
         return ended, reason, ended and not reason.startswith("aborted")
 
+    def _status_heartbeat(self) -> None:
+        if self.start_wall is not None and not self.ended:
+            self._publish_status("running", "")
+
     def _realtime_tick(self) -> None:
         if not self.ended:
             self._advance()
@@ -265,12 +274,14 @@ class PlantNode(Node):
 
     def _publish_state(self) -> None:
         stamp = ns_to_stamp(self.step_k * self.dt_ns)
-        self.pub_clock.publish(Clock(clock=stamp))
         msg = VehicleState()
         msg.header.stamp = stamp
         msg.header.frame_id = "map"
         fill_vehicle_state(msg, self.outputs)
+        # The state starts the control chain (in lockstep the next step waits on it): it
+        # goes first, so the controllers compute while /clock and /vehicle/odom go out.
         self.pub_state.publish(msg)
+        self.pub_clock.publish(Clock(clock=stamp))
         o = self.outputs
         odom = Odometry()
         odom.header = msg.header
