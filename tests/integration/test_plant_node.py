@@ -69,7 +69,7 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     beats = [s for s in status if s["state"] == "running" and s["wall_time_s"] is not None]
     if end["wall_time_s"] > 0.15:
         assert beats, status
-    for a, b in zip(beats, beats[1:] + [end]):
+    for a, b in zip(beats, beats[1:] + [end], strict=True):
         assert a["steps"] <= b["steps"] and a["wall_time_s"] <= b["wall_time_s"]
         assert a["sim_time_s"] == pytest.approx(a["steps"] * 0.01)
     assert sorted(states) == list(range(101)), "every step 0..100 published once at least"
