@@ -28,6 +28,21 @@ def test_two_nodes_exchange_messages_over_a_real_topic(graph, ros):
         assert m.delta_front == pytest.approx(2.0 * (m.yaw_moment / 0.5))
 
 
+def _niceness(pid: int) -> int:
+    with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+        return int(fh.read().rsplit(")", 1)[1].split()[16])  # field 19: nice
+
+
+def test_a_node_spec_nice_lowers_that_process_priority_only(graph):
+    sup = graph([NodeSpec(**script_node("talker.py", "talker")),
+                 NodeSpec(**script_node("relay.py", "relay"), nice=7)])
+    base = os.nice(0)
+    assert _niceness(sup.procs["talker"].popen.pid) == base
+    assert _niceness(sup.procs["relay"].popen.pid) == min(base + 7, 19)
+    with pytest.raises(ValueError, match="nice"):
+        NodeSpec("x", "p", "e", nice=-1)
+
+
 def test_crashing_node_is_reported_by_name_and_the_others_are_stopped(graph):
     sup = graph([NodeSpec(**script_node("talker.py", "talker")),
                  NodeSpec(**script_node("crasher.py", "crasher"))])

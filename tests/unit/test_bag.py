@@ -38,6 +38,7 @@ from fourws_bringup.bag import (  # noqa: E402
     topic_info,
     type_hash,
 )
+from fourws_bringup.paper import step_latencies_ms  # noqa: E402
 from fourws_msgs.msg import (  # noqa: E402
     MpcCommand,
     MpcDiagnostics,
@@ -311,6 +312,24 @@ def test_read_run_sorts_by_stamp_and_keeps_the_first_of_each_stamp(tmp_path):
     run = read_run(tmp_path / "b")
     np.testing.assert_array_equal(run.state["stamp_ns"], [0, DT_NS, 2 * DT_NS])
     np.testing.assert_array_equal(run.state["x"], [0.0, 10.0, 20.0])
+    np.testing.assert_array_equal(run.state["log_ns"], [1001, 1002, 1000])  # the first's
+
+
+def test_step_latencies_are_the_receive_time_differences_along_the_chain(tmp_path):
+    """write_run_bag logs one message per µs, per step: clock, state, odom, MPC command,
+    diagnostics, torques. Each stage is then 2 µs and the step 6 µs; no drive command."""
+    write_run_bag(tmp_path / "bag", steps=40)
+    run = read_run(tmp_path / "bag")
+    assert np.all(np.diff(run.state["log_ns"]) == 6000)
+    lat = step_latencies_ms(run)
+    assert set(lat) == {"state_to_mpc_command", "mpc_command_to_wheel_torques",
+                        "wheel_torques_to_next_state", "step"}
+    for stage in ("state_to_mpc_command", "mpc_command_to_wheel_torques",
+                  "wheel_torques_to_next_state"):
+        assert lat[stage] == pytest.approx({"p50": 0.002, "p90": 0.002})
+    assert lat["step"] == pytest.approx({"p50": 0.006, "p90": 0.006})
+    lat_sum = sum(lat[k]["p50"] for k in lat if k != "step")
+    assert lat_sum == pytest.approx(lat["step"]["p50"])
 
 
 def test_writer_refuses_a_non_empty_output_folder(tmp_path):

@@ -691,19 +691,22 @@ def _column(values: list[Any]) -> np.ndarray:
     return np.array(values, dtype=float)
 
 
-def _columns(stamped: list[tuple[int, Any]]) -> dict[str, np.ndarray]:
-    """Per-step columns from ``(stamp_ns, msg)``: first message of each stamp, by stamp."""
-    first: dict[int, Any] = {}
-    for stamp, msg in stamped:
+def _columns(stamped: list[tuple[int, int, Any]]) -> dict[str, np.ndarray]:
+    """Per-step columns from ``(stamp_ns, log_time_ns, msg)``: the first message of each
+    stamp, sorted by stamp; ``log_ns`` is when the recorder received it."""
+    first: dict[int, tuple[int, Any]] = {}
+    for stamp, log_ns, msg in stamped:
         if stamp not in first:
-            first[stamp] = msg
+            first[stamp] = (log_ns, msg)
     stamps = sorted(first)
     out: dict[str, np.ndarray] = {"stamp_ns": np.array(stamps, dtype=np.int64),
-                                  "t_s": np.array(stamps, dtype=np.int64) * 1e-9}
+                                  "t_s": np.array(stamps, dtype=np.int64) * 1e-9,
+                                  "log_ns": np.array([first[s][0] for s in stamps],
+                                                     dtype=np.int64)}
     if not stamps:
         return out
-    for name in _fields(first[stamps[0]]):
-        out[name] = _column([getattr(first[s], name) for s in stamps])
+    for name in _fields(first[stamps[0]][1]):
+        out[name] = _column([getattr(first[s][1], name) for s in stamps])
     return out
 
 
@@ -717,10 +720,11 @@ STEP_TOPICS = {"/vehicle/state": "state", "/control/mpc_command": "mpc_command",
 class RunData:
     """A recorded run as per-step numpy arrays (SI units, as on the wire).
 
-    Each per-topic dict has ``stamp_ns`` (int64), ``t_s`` and one array per message field
+    Each per-topic dict has ``stamp_ns`` (int64), ``t_s``, ``log_ns`` (int64, the recorder's
+    receive time, wall clock) and one array per message field
     (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one row per header
     stamp (the first message of each stamp), sorted by stamp. A topic absent from the bag
-    gives a dict with empty ``stamp_ns``/``t_s`` only.
+    gives a dict with empty ``stamp_ns``/``t_s``/``log_ns`` only.
     """
 
     path: Path
@@ -762,11 +766,11 @@ def read_run(path: str | Path) -> RunData:
         status_text = None
         wanted = [t for t in (*STEP_TOPICS, "/reference/trajectory", "/run/status")
                   if t in bag.channels]
-        for topic, _log_ns, msg in bag.decoded(wanted):
+        for topic, log_ns, msg in bag.decoded(wanted):
             if topic in per:
                 stamp = _stamp_of(msg)
                 if stamp is not None:
-                    per[topic].append((stamp, msg))
+                    per[topic].append((stamp, log_ns, msg))
             elif topic == "/reference/trajectory":
                 reference = msg
             elif topic == "/run/status":

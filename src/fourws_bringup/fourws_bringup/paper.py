@@ -109,7 +109,45 @@ def metrics_from_run(run) -> dict:
     fb = diag.get("fallback")
     m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
     m["missing_steps"] = missing_steps(run)
+    lat = step_latencies_ms(run)
+    if lat:
+        m["step_latency_ms"] = lat
     return m
+
+
+LATENCY_STAGES = (
+    # name, from topic, to topic, to the next step's stamp
+    ("state_to_mpc_command", "state", "mpc_command", False),
+    ("state_to_drive_command", "state", "drive_command", False),
+    ("mpc_command_to_wheel_torques", "mpc_command", "wheel_torques", False),
+    ("wheel_torques_to_next_state", "wheel_torques", "state", True),
+    ("step", "state", "state", True),
+)
+
+
+def step_latencies_ms(run) -> dict[str, dict[str, float]]:
+    """Where each step's wall time goes, from the recorder's receive times (``log_ns``):
+    per stage of the lockstep chain (state → MPC command → wheel torques → next state), the
+    median and 90th percentile in ms over the steps that have both ends. The recorder's own
+    delivery delay cancels in each difference up to its jitter. Empty for a bag without
+    receive times or with fewer than two steps."""
+    import numpy as np
+
+    out: dict[str, dict[str, float]] = {}
+    for name, src, dst, next_step in LATENCY_STAGES:
+        a, b = getattr(run, src), getattr(run, dst)
+        if len(a.get("log_ns", ())) < 2 or len(b.get("log_ns", ())) < 2:
+            continue
+        stamps_a = np.asarray(a["stamp_ns"], dtype=np.int64)
+        want = stamps_a[1:] if next_step else stamps_a
+        start = a["log_ns"][:-1] if next_step else a["log_ns"]
+        idx = np.searchsorted(b["stamp_ns"], want)
+        ok = idx < len(b["stamp_ns"])
+        ok[ok] = b["stamp_ns"][idx[ok]] == want[ok]
+        d = (b["log_ns"][idx[ok]] - start[ok]) * 1e-6
+        if len(d):
+            out[name] = {"p50": float(np.median(d)), "p90": float(np.percentile(d, 90))}
+    return out
 
 
 def missing_steps(run) -> int:
@@ -245,8 +283,10 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None) 
         print(f"[{bar}] run {i + 1}/{len(runs)}: {ctrl} on {scen}", file=sys.stderr)
         m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen), force=True)
         results[(ctrl, scen)] = m
+        step_ms = (m.get("step_latency_ms") or {}).get("step", {}).get("p50", float("nan"))
         print(f"    max|eY| {m.get('max_abs_lateral_error_m', float('nan')):.4f} m, "
-              f"RTF {m.get('real_time_factor') or float('nan'):.2f}, "
+              f"RTF {m.get('real_time_factor') or float('nan'):.2f} "
+              f"(step {step_ms:.2f} ms median), "
               f"{'completed' if m.get('completed') else 'NOT completed: ' + m.get('reason', '')}",
               file=sys.stderr)
     wall = time.monotonic() - t_start

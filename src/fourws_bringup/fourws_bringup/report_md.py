@@ -47,6 +47,22 @@ def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
             f"{m.get('np_min', '')}..{m.get('np_max', '')} | "
             f"{m.get('nc_min', '')}..{m.get('nc_max', '')} |")
     lines += ["", f"Total wall time of the {len(results)} runs: {wall_s:.0f} s.", ""]
+    lines += [
+        "## Where a step's wall time goes", "",
+        "Median (p90) in ms per stage of the lockstep chain, from the recorder's receive "
+        "times (`step_latency_ms` in each metrics.json). Each stage holds one node's compute "
+        "plus one DDS delivery; `step` is the full period, state to next state.", "",
+        "| run | step | state → MPC command | MPC command → wheel torques "
+        "| wheel torques → next state | state → drive command |",
+        "|---|---|---|---|---|---|",
+    ]
+    stages = ("step", "state_to_mpc_command", "mpc_command_to_wheel_torques",
+              "wheel_torques_to_next_state", "state_to_drive_command")
+    for (ctrl, scen), m in results.items():
+        lat = m.get("step_latency_ms") or {}
+        cells = [f"{lat[k]['p50']:.2f} ({lat[k]['p90']:.2f})" if k in lat else "" for k in stages]
+        lines.append(f"| {ctrl}@{scen} | " + " | ".join(cells) + " |")
+    lines.append("")
     for scen, paths in figs.items():
         lines += [f"## Figures: {scen}", ""]
         lines += [f"![{p.stem}]({p.relative_to(out).as_posix()})" for p in paths]

@@ -70,6 +70,11 @@ class NodeSpec:
     extra_args: list[str] = field(default_factory=list)
     log_level: str = "info"
     argv: list[str] | None = None  # a program to run instead of lib/<package>/<executable>
+    nice: int = 0  # added to the process's niceness (0..19): lower CPU priority
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.nice <= 19:
+            raise ValueError(f"{self.name}: nice must be in 0..19, got {self.nice}")
 
     def command(self) -> list[str]:
         program = self.argv or [str(executable_path(self.package, self.executable))]
@@ -185,9 +190,16 @@ class Supervisor:
     def _spawn(self, spec: NodeSpec) -> None:
         log_path = self.log_dir / f"{spec.name}.log"
         fh = open(log_path, "w", encoding="utf-8")  # noqa: SIM115
+        nice = spec.nice
+
+        def preexec() -> None:
+            _set_pdeathsig()
+            if nice:
+                os.nice(nice)
+
         popen = subprocess.Popen(  # noqa: S603
             spec.command(), stdout=fh, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            env=self.env, start_new_session=True, preexec_fn=_set_pdeathsig,
+            env=self.env, start_new_session=True, preexec_fn=preexec,
         )
         fh.close()
         self.procs[spec.name] = _Proc(spec, popen, log_path)
