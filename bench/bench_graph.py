@@ -1,0 +1,130 @@
+"""Cost of the ROS graph itself: one DDS hop between two rclpy processes, and a full run.
+
+Usage: python bench/bench_graph.py [OUT.json]   (default bench/results_graph.json)
+
+1. ``hop``: round trip of a small stamped message (MpcCommand, CONTROL_QOS) between two
+   rclpy processes with the nodes' executor (EventsExecutor), 2 000 round trips after 100
+   warm-up ones; half the median round trip is the floor of one stage of the lockstep chain
+   (state → MPC → allocator → plant: three stages a step) on this machine, before any
+   computation.
+2. ``run``: ``fourws run`` of improved on dlc_60_mu05 in lockstep with the recorder: the
+   real-time factor and ``step_latency_ms`` (per chain stage, from the bag).
+
+Both run in a domain of their own (the supervisor's DomainLease). Needs the built
+workspace (``source ros_ws/env.sh``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+
+N_ROUND_TRIPS = 2_000
+N_WARMUP = 100
+
+ECHO = textwrap.dedent("""
+    import sys, time
+    import rclpy
+    import rclpy.executors
+    from rclpy.experimental import EventsExecutor
+    from fourws_common.qos import CONTROL_QOS
+    from fourws_msgs.msg import MpcCommand
+    rclpy.init()
+    node = rclpy.create_node("bench_echo")
+    pub = node.create_publisher(MpcCommand, "/bench/pong", CONTROL_QOS)
+    node.create_subscription(MpcCommand, "/bench/ping", pub.publish, CONTROL_QOS)
+    ex = EventsExecutor()
+    ex.add_node(node)
+    end = time.monotonic() + float(sys.argv[1])
+    try:
+        while time.monotonic() < end and rclpy.ok():
+            ex.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+""")
+
+
+def bench_hop() -> dict:
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+
+    from fourws_common.qos import CONTROL_QOS
+    from fourws_msgs.msg import MpcCommand
+
+    echo = subprocess.Popen([sys.executable, "-c", ECHO, "120"])  # noqa: S603
+    rclpy.init()
+    try:
+        node = rclpy.create_node("bench_ping")
+        pub = node.create_publisher(MpcCommand, "/bench/ping", CONTROL_QOS)
+        got: list[int] = []
+        node.create_subscription(MpcCommand, "/bench/pong",
+                                 lambda _m: got.append(time.perf_counter_ns()), CONTROL_QOS)
+        ex = EventsExecutor()
+        ex.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while pub.get_subscription_count() < 1 or node.count_publishers("/bench/pong") < 1:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the echo process never matched")
+            ex.spin_once(timeout_sec=0.05)
+        rtt = []
+        for i in range(N_WARMUP + N_ROUND_TRIPS):
+            n, t0 = len(got), time.perf_counter_ns()
+            pub.publish(MpcCommand(delta_front=float(i)))
+            while len(got) == n:
+                ex.spin_once(timeout_sec=1.0)
+            if i >= N_WARMUP:
+                rtt.append((got[-1] - t0) * 1e-3)
+        r = np.asarray(rtt)
+        return {"round_trips": len(r), "round_trip_us_median": float(np.median(r)),
+                "round_trip_us_p90": float(np.percentile(r, 90)),
+                "round_trip_us_p99": float(np.percentile(r, 99)),
+                "stage_floor_ms": float(np.median(r)) * 0.5e-3}
+    finally:
+        echo.terminate()
+        echo.wait(10)
+        rclpy.try_shutdown()
+
+
+def bench_run() -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        cmd = ["fourws", "run", "--scenario", "dlc_60_mu05", "--controller", "improved",
+               "--out", str(out), "--no-plots"]
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL,  # noqa: S603
+                       stderr=subprocess.DEVNULL)
+        m = json.loads((out / "metrics.json").read_text())
+    keys = ("steps", "sim_time_s", "wall_time_s", "real_time_factor", "mpc_solve_ms_p50",
+            "mpc_solve_ms_p99", "missing_steps", "step_latency_ms")
+    return {"run": "improved@dlc_60_mu05", **{k: m.get(k) for k in keys}}
+
+
+def main(out: str) -> int:
+    from fourws_bringup.supervisor import DomainLease
+
+    lease = DomainLease()
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain_id)
+    try:
+        hop = bench_hop()
+        print(f"hop: round trip median {hop['round_trip_us_median']:.0f} µs "
+              f"(p90 {hop['round_trip_us_p90']:.0f}): {hop['stage_floor_ms']:.2f} ms per stage")
+    finally:
+        lease.release()
+    run = bench_run()
+    lat = run.get("step_latency_ms") or {}
+    print(f"run: RTF {run['real_time_factor']:.2f}, step median "
+          f"{lat.get('step', {}).get('p50', float('nan')):.2f} ms, MPC solve median "
+          f"{run['mpc_solve_ms_p50']:.2f} ms")
+    Path(out).write_text(json.dumps({"hop": hop, "run": run}, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1] if len(sys.argv) > 1 else "bench/results_graph.json"))
