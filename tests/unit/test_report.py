@@ -166,3 +166,27 @@ def test_missing_steps_counts_gaps_in_any_per_step_topic():
     keep[100:110] = False                            # ... or 10 states
     st = {k: v[keep] for k, v in run.state.items()}
     assert missing_steps(RunData(**{**run.__dict__, "state": st})) == 10
+
+
+def test_rankings_group_ties_within_one_percent_and_aborted_runs_rank_last():
+    from fourws_bringup.paper import TIE_REL, consistent, format_tables, rank, tie_groups
+
+    m = {"a": {"completed": True, "max_abs_lateral_error_m": 0.978e-3},
+         "b": {"completed": True, "max_abs_lateral_error_m": 0.952e-3},
+         "c": {"completed": True, "max_abs_lateral_error_m": 0.953e-3},
+         "d": {"completed": False, "max_abs_lateral_error_m": 0.5e-3, "sim_time_s": 5.0}}
+    order = rank(m, "max_abs_lateral_error_m")
+    assert order == ["b", "c", "a", "d"]                 # aborted last despite its small error
+    groups = tie_groups(m, order, "max_abs_lateral_error_m")
+    assert groups == [["b", "c"], ["a"], ["d"]]           # 0.1 % apart tie; 2.7 % do not
+    assert TIE_REL == 0.01
+    assert consistent(groups, ["c", "b", "a", "d"]) and consistent(groups, order)
+    assert not consistent(groups, ["a", "b", "c", "d"]) and not consistent(groups, ["x"])
+    keys = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
+            "max_abs_sideslip_deg", "rmse_sideslip_deg")
+    res = {(c, "dlc_60_mu05"): {k: v for k in keys} | {"completed": True}
+           for c, v in (("improved", 0.953e-3), ("ampc_4ws_dyc", 0.952e-3),
+                        ("ampc_4ws", 0.978e-3))}
+    text = format_tables(res)
+    assert ("fourws ampc_4ws_dyc ≈ improved < ampc_4ws; paper improved < ampc_4ws_dyc < "
+            "ampc_4ws (same up to a tie within 1%: ampc_4ws_dyc ≈ improved)") in text
