@@ -71,13 +71,16 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     out = {"scenario": Path(scenario).stem, "controller": controller}
     out["steps"] = int(m.pop("steps"))
     out["sim_time_s"] = float(m.pop("sim_time_s"))
-    # The plant's own span from its first state to the end (in the bag); the runner's clock
-    # only when the bag has none (a plant that died).
+    # The plant's own span from its first answered state to the end (in the bag; the wait
+    # before it, nodes discovering each other, is startup_wait_s); the runner's clock only
+    # when the bag has none (a plant that died).
     wall = status.get("wall_time_s")
     if not isinstance(wall, int | float) or not wall > 0:
         wall = outcome.wall_time_s if outcome else float("nan")
     out["wall_time_s"] = wall
     out["real_time_factor"] = out["sim_time_s"] / wall if wall and wall == wall else None
+    startup = status.get("startup_wait_s")
+    out["startup_wait_s"] = float(startup) if isinstance(startup, int | float) else None
     out.update(m)
     if outcome is not None:
         out["completed"] = bool(outcome.completed)

@@ -6,6 +6,10 @@ import sys
 from pathlib import Path
 
 
+def _num(v, fmt: str) -> str:
+    return format(v, fmt) if isinstance(v, int | float) else ""
+
+
 def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
                  wall_s: float) -> Path:
     """Tables, comparison figures per scenario (overlaying the controllers) and a run table."""
@@ -31,9 +35,9 @@ def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
         "magnitude and ranking, not a fit.", "",
         tables, "",
         "## Runs", "",
-        "| run | completed | reason | steps | sim time s | wall time s | RTF | MPC p50 ms "
-        "| MPC p99 ms | deadline misses | Np range | Nc range |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| run | completed | reason | steps | sim time s | wall time s | RTF | start-up wait s "
+        "| MPC p50 ms | MPC p99 ms | deadline misses | Np range | Nc range |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (ctrl, scen), m in results.items():
         rtf = m.get("real_time_factor")
@@ -42,6 +46,7 @@ def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
             f"{m.get('steps', '')} | {m.get('sim_time_s', float('nan')):.2f} | "
             f"{m.get('wall_time_s', float('nan')):.1f} | "
             f"{rtf if rtf is None else f'{rtf:.2f}'} | "
+            f"{_num(m.get('startup_wait_s'), '.2f')} | "
             f"{m.get('mpc_solve_ms_p50', float('nan')):.2f} | "
             f"{m.get('mpc_solve_ms_p99', float('nan')):.2f} | {m.get('deadline_misses', '')} | "
             f"{m.get('np_min', '')}..{m.get('np_max', '')} | "

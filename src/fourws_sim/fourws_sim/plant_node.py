@@ -122,7 +122,11 @@ class PlantNode(Node):
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
         log.info(f"mode {cfg.mode}, dt {cfg.dt_s} s, substep {cfg.substep_s} s")
-        self.start_wall: float | None = None  # monotonic s at the first state: the run's wall time
+        # monotonic s: the first state published; the publication of the first state that was
+        # answered (the run's wall time counts from here; the wait between the two is start-up:
+        # nodes still discovering each other).
+        self.start_wall: float | None = None
+        self.answered_wall: float | None = None
         self._publish_reference()
         self._publish_status("running", "")
         self.outputs = self.sim.outputs()
@@ -203,6 +207,8 @@ class PlantNode(Node):
 
     def _advance(self) -> None:
         cfg = self.params.config
+        if self.answered_wall is None:
+            self.answered_wall = self.last_publish
         self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1], self.torque_cmd,
                                      dt_s=cfg.dt_s)
         self._warn_clipping()
@@ -317,13 +323,20 @@ class PlantNode(Node):
         self.pub_path.publish(path)
 
     def _publish_status(self, state: str, reason: str, completed: bool = False) -> None:
-        """/run/status JSON. ``wall_time_s``: from the first state to now (the plant's own
-        monotonic clock), so the real-time factor is in the bag and excludes start-up."""
-        wall = None if self.start_wall is None else time.monotonic() - self.start_wall
+        """/run/status JSON. ``wall_time_s``: from the publication of the first state that
+        was answered to now (the plant's own monotonic clock), so the real-time factor is in
+        the bag and excludes start-up; ``startup_wait_s``: from the first state to that one
+        (republished every ``republish_period_s`` until the graph has discovered itself)."""
+        now = time.monotonic()
+        origin = self.answered_wall if self.answered_wall is not None else self.start_wall
+        wall = None if origin is None else now - origin
+        startup = (None if self.start_wall is None or self.answered_wall is None
+                   else self.answered_wall - self.start_wall)
         self.pub_status.publish(String(data=json.dumps({
             "state": state, "completed": completed, "reason": reason, "steps": self.step_k,
             "sim_time_s": self.step_k * self.dt_ns * 1e-9, "scenario": self.scenario.name,
             "rejected_commands": self.reject_log.count, "wall_time_s": wall,
+            "startup_wait_s": startup,
         })))
 
 
