@@ -119,7 +119,7 @@ class _Monitor:
         self.node = rclpy.create_node(f"fourws_run_monitor_{id(self)}", context=self.ctx,
                                       start_parameter_services=False)
         self.sim_time_s = 0.0
-        self.wall_time_s: float | None = None  # the plant's, from its first state
+        self.wall_time_s: float | None = None  # the plant's, from its first answered state
         self.ended_wall: float | None = None
         self.status: dict = {}
         self.node.create_subscription(String, "/run/status", self._on_status, LATCHED_QOS)
