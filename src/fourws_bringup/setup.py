@@ -29,6 +29,7 @@ setup(
             "fourws = fourws_bringup.cli:main",
             "recorder_node = fourws_bringup.recorder_node:main",
             "replay_node = fourws_bringup.replay_node:main",
+            "container = fourws_bringup.container:main",
         ],
     },
 )

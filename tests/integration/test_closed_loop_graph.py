@@ -10,7 +10,10 @@ One module-scoped set of lockstep runs of the paper's 60 km/h, μ = 0.5 lane cha
   over processes: recorded states and commands equal the in-process ones to 1e-9;
 - replaying the recorded /vehicle/state and /reference/trajectory into a fresh mpc_node in
   lockstep reproduces the recorded /control/mpc_command to 1e-9;
-- ``fourws report`` recomputes metrics.json from the bag alone.
+- ``fourws report`` recomputes metrics.json from the bag alone;
+- the same run with the MPC, PID and allocator composed in one container process
+  (``--compose control``), and with the plant in it too (``--compose all``), records the same
+  states and commands, exactly.
 """
 
 from __future__ import annotations
@@ -45,6 +48,10 @@ def runs(tmp_path_factory):
         folder = base / f"{c}@{SCENARIO}"
         metrics = run_and_score(SCENARIO, c, folder, plots=False, progress=False)
         out[c] = (folder, metrics)
+    for layout in ("control", "all"):
+        folder = base / f"improved@{SCENARIO}-{layout}"
+        out[f"improved-{layout}"] = (folder, run_and_score(
+            SCENARIO, "improved", folder, plots=False, progress=False, compose=layout))
     return out
 
 
@@ -56,6 +63,36 @@ def test_every_run_is_recorded_whole_and_the_4ws_presets_complete(runs):
         assert (folder / "bag" / "metadata.yaml").is_file(), c
     for c in ("improved", "mpc_4ws"):
         assert runs[c][1]["completed"] and runs[c][1]["steps"] > 900, (c, runs[c][1]["reason"])
+
+
+@pytest.mark.parametrize(("layout", "container", "hosted"), [
+    ("control", "control_container", ("mpc_node", "speed_pid_node", "allocator_node")),
+    ("all", "node_container", ("plant_node", "mpc_node", "speed_pid_node", "allocator_node")),
+])
+def test_composed_nodes_record_the_same_run(runs, layout, container, hosted):
+    """Hosting nodes in one container process changes the timing only: the lockstep answers
+    are keyed by the state stamp, so every recorded state, command and torque equals the
+    one-process-per-node run's bit for bit."""
+    (folder_c, m_c), (folder_s, m_s) = runs[f"improved-{layout}"], runs["improved"]
+    assert m_c["compose"] == layout and m_s["compose"] == "none"
+    assert m_c["completed"] and m_c["missing_steps"] == 0, m_c["reason"]
+    logs = {p.name for p in (folder_c / "logs").iterdir()}
+    alone = {"plant_node.log"} if layout == "control" else set()
+    assert logs == {f"{container}.log", "recorder_node.log"} | alone, logs
+    log = (folder_c / "logs" / f"{container}.log").read_text()
+    for node in hosted:
+        assert f"[{node}]" in log, (node, "did not log from the container")
+    composed, separate = read_run(folder_c), read_run(folder_s)
+    assert composed.steps == separate.steps
+    for key in ("x", "y", "yaw", "vx", "vy", "yaw_rate"):
+        np.testing.assert_array_equal(composed.state[key], separate.state[key], err_msg=key)
+    for key in ("delta_front", "delta_rear", "yaw_moment"):
+        np.testing.assert_array_equal(composed.mpc_command[key], separate.mpc_command[key],
+                                      err_msg=key)
+    np.testing.assert_array_equal(composed.wheel_torques["torque"],
+                                  separate.wheel_torques["torque"])
+    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m", "max_abs_sideslip_deg"):
+        assert m_c[key] == m_s[key], key
 
 
 def test_controllers_rank_as_tables_6_7_over_topics(runs):

@@ -40,17 +40,27 @@ def test_unknown_controller_and_overdemanding_scenario_are_clear_errors(tmp_path
     assert r.returncode == 2 and "μg" in r.stderr
 
 
-def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path):
+@pytest.mark.parametrize(("compose", "expected"), [
+    ("none", "mpc_node"),
+    ("control", "control_container (mpc_node, speed_pid_node, allocator_node)"),
+    ("all", "node_container (plant_node, mpc_node, speed_pid_node, allocator_node)"),
+])
+def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path, compose, expected):
+    """A bad MPC parameter kills the process hosting mpc_node at start-up; the run stops,
+    keeps its bag folder, and metrics.json names the process (and, for the container, the
+    nodes it hosted); the log says which parameter was wrong."""
     preset = tmp_path / "broken.yaml"
     preset.write_text(yaml.safe_dump({
         "mpc_node": {"ros__parameters": {"controller": "broken", "q_y": -5.0}},
         "allocator_node": {"ros__parameters": {"method": "optimal"}}}))
     out = tmp_path / "run"
     r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", str(preset),
-                "--out", str(out), "--no-plots")
+                "--out", str(out), "--no-plots", "--compose", compose)
     assert r.returncode == 1
     m = json.loads((out / "metrics.json").read_text())
-    assert m["completed"] is False and m["died"] == "mpc_node"
-    assert "mpc_node" in m["reason"]
-    assert (out / "logs" / "mpc_node.log").read_text().count("q_y") >= 1
+    process = expected.split()[0]
+    assert m["completed"] is False and m["died"] == expected
+    assert expected in m["reason"]
+    assert m["compose"] == compose
+    assert (out / "logs" / f"{process}.log").read_text().count("q_y") >= 1
     assert (out / "bag" / "metadata.yaml").is_file(), "the run's bag folder is kept"

@@ -24,7 +24,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     try:
         metrics = run_and_score(args.scenario, args.controller, Path(args.out),
-                                force=args.force, mode=args.mode, plots=not args.no_plots)
+                                force=args.force, mode=args.mode, plots=not args.no_plots,
+                                compose=args.compose)
     except RunError as exc:
         print(f"fourws run: {exc}", file=sys.stderr)
         return 2
@@ -37,7 +38,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     from .runner import RunError
 
     try:
-        return run_paper(Path(args.out), force=args.force, only=args.only)
+        return run_paper(Path(args.out), force=args.force, only=args.only,
+                         compose=args.compose)
     except RunError as exc:
         print(f"fourws paper: {exc}", file=sys.stderr)
         return 2
@@ -84,6 +86,12 @@ def _cmd_list(kind: str) -> int:
     return 0
 
 
+COMPOSE_CHOICES = ("none", "control", "all")  # fourws_bringup.runner.COMPOSE_LAYOUTS
+COMPOSE_HELP = ("process layout: none (one process per node), control (MPC, speed PID and "
+                "allocator in one container process) or all (the plant too); same nodes, "
+                "parameters, topics and results, fewer processes to wake each step")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="fourws", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -96,12 +104,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
     r.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     r.add_argument("--no-plots", action="store_true", help="skip the figures")
+    r.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
     r.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("paper", help="run the paper's eight configurations and print Tables 6-8")
     p.add_argument("--out", default="runs/paper")
     p.add_argument("--force", action="store_true")
     p.add_argument("--only", nargs="*", help="subset of runs, as controller@scenario")
+    p.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
     p.set_defaults(func=_cmd_paper)
 
     rep = sub.add_parser("report", help="metrics and figures from a recorded bag or run folder")

@@ -178,8 +178,13 @@ def missing_steps(run) -> int:
 
 
 def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
-                  mode: str = "lockstep", plots: bool = True, progress: bool = True) -> dict:
-    """``fourws run``: one run over topics, then metrics.json and plots from its bag."""
+                  mode: str = "lockstep", plots: bool = True, progress: bool = True,
+                  compose: str = "none") -> dict:
+    """``fourws run``: one run over topics, then metrics.json and plots from its bag.
+
+    ``compose``: the process layout (:func:`fourws_bringup.runner.graph_specs`), recorded in
+    metrics.json; it changes the timing only, never a recorded value.
+    """
     from fourws_sim.core.scenario import load_scenario
 
     from .runner import RunError, controller_preset
@@ -191,7 +196,8 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         raise RunError(f"scenario '{scenario}': {exc}") from exc
     prepare_out_dir(out_dir, force)
     print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
-    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress)
+    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
+                        compose=compose)
     try:
         metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
@@ -200,6 +206,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
                    "wall_time_s": outcome.wall_time_s}
         if outcome.died:
             metrics["died"] = outcome.died
+    metrics["compose"] = compose
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     if plots and (out_dir / "bag").exists():
         try:
@@ -292,7 +299,8 @@ def format_tables(results: dict[tuple[str, str], dict]) -> str:
     return "\n".join(lines)
 
 
-def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None) -> int:
+def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
+              compose: str = "none") -> int:
     """``fourws paper``: the eight runs, the tables beside the paper's, report.md."""
     from .runner import RunError
 
@@ -307,7 +315,8 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None) 
     for i, (ctrl, scen) in enumerate(runs):
         bar = "#" * i + "." * (len(runs) - i)
         print(f"[{bar}] run {i + 1}/{len(runs)}: {ctrl} on {scen}", file=sys.stderr)
-        m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen), force=True)
+        m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen), force=True,
+                          compose=compose)
         results[(ctrl, scen)] = m
         step_ms = (m.get("step_latency_ms") or {}).get("step", {}).get("p50", float("nan"))
         print(f"    max|eY| {m.get('max_abs_lateral_error_m', float('nan')):.4f} m, "

@@ -23,6 +23,13 @@ from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorE
 
 CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 RECORDER_NICE = 10  # niceness added to the recorder process
+#: Process layouts of a run: container process name and the nodes it hosts (None: one
+#: process per node). The recorder is never composed: it is off the control chain.
+COMPOSE_LAYOUTS: dict[str, tuple[str, tuple[str, ...]] | None] = {
+    "none": None,
+    "control": ("control_container", ("mpc_node", "speed_pid_node", "allocator_node")),
+    "all": ("node_container", ("plant_node", "mpc_node", "speed_pid_node", "allocator_node")),
+}
 
 
 class RunError(RuntimeError):
@@ -60,8 +67,16 @@ def prepare_out_dir(out_dir: Path, force: bool) -> None:
 
 
 def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
-                extra_plant: dict | None = None) -> list[NodeSpec]:
-    """The node list of a run: every node with its package YAML and the controller preset."""
+                extra_plant: dict | None = None, compose: str = "none") -> list[NodeSpec]:
+    """The node list of a run: every node with its package YAML and the controller preset.
+
+    ``compose`` (:data:`COMPOSE_LAYOUTS`) picks the processes: ``none``, one per node;
+    ``control``, the MPC, speed PID and allocator in one container process; ``all``, the plant
+    too. Same nodes, parameters and topics in every layout (:mod:`fourws_bringup.container`);
+    the recorder always has a process of its own.
+    """
+    if compose not in COMPOSE_LAYOUTS:
+        raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
     preset = str(controller_preset(controller))
     subscribers = 3 + (1 if bag_dir is not None else 0)
     plant_params = {"scenario": scenario_arg(scenario), "mode": mode,
@@ -80,6 +95,11 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                  params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
                                preset], parameters={"sync": sync}),
     ]
+    layout = COMPOSE_LAYOUTS[compose]
+    if layout is not None:
+        name, hosted = layout
+        inside = [s for s in specs if s.name in hosted]
+        specs = [s for s in specs if s.name not in hosted] + [NodeSpec.compose(name, inside)]
     if bag_dir is not None:
         # The recorder is off the control chain (it buffers and writes chunks), so it yields
         # the CPU to the nodes the next step waits on: on 2 cores this cut the median step
@@ -155,10 +175,12 @@ class _Monitor:
 
 def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "lockstep",
               record: bool = True, progress: bool = True, timeout_s: float = 1800.0,
-              extra_plant: dict | None = None, stream=sys.stderr) -> RunOutcome:
+              extra_plant: dict | None = None, compose: str = "none",
+              stream=sys.stderr) -> RunOutcome:
     """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome."""
     bag_dir = out_dir / "bag" if record else None
-    specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant)
+    specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose)
+    plant = next(s.name for s in specs if "plant_node" in s.graph_names)  # its process
     lease = DomainLease()
     sup = Supervisor(specs, lease.domain_id, out_dir / "logs")
     monitor = None
@@ -174,10 +196,10 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
         while True:
             monitor.spin(0.05)
             exited = sup.exited()
-            if "plant_node" in exited:
-                if exited["plant_node"] != 0:
-                    raise NodeDied("plant_node", exited["plant_node"],
-                                   sup.procs["plant_node"].last_lines())
+            if plant in exited:
+                if exited[plant] != 0:
+                    raise NodeDied(sup.describe(plant), exited[plant],
+                                   sup.procs[plant].last_lines())
                 break
             sup.check()
             now = time.monotonic()

@@ -71,15 +71,47 @@ class NodeSpec:
     log_level: str = "info"
     argv: list[str] | None = None  # a program to run instead of lib/<package>/<executable>
     nice: int = 0  # added to the process's niceness (0..19): lower CPU priority
+    # Graph names of the nodes a container process hosts (empty: one node named ``name``).
+    # A container keeps its nodes' own names; ``parameters`` keys are then ``node:param``.
+    hosts: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not 0 <= self.nice <= 19:
             raise ValueError(f"{self.name}: nice must be in 0..19, got {self.nice}")
 
+    @property
+    def graph_names(self) -> tuple[str, ...]:
+        """The node names this process puts in the ROS graph."""
+        return self.hosts or (self.name,)
+
+    @classmethod
+    def compose(cls, name: str, specs: list[NodeSpec]) -> NodeSpec:
+        """One ``fourws_bringup/container`` process hosting the nodes of ``specs``.
+
+        Parameter files are passed once each (their sections are keyed by node name) and each
+        spec's ``parameters`` become node-qualified (``-p allocator_node:sync:=lockstep``), so
+        every node gets exactly the parameters it would get in a process of its own.
+        """
+        if not specs:
+            raise ValueError(f"{name}: a container needs at least one node")
+        bad = [s.name for s in specs if s.hosts or s.argv or s.remappings or s.extra_args]
+        if bad:
+            raise ValueError(f"{name}: cannot host {bad} (containers, custom programs, "
+                             "remappings and extra arguments stay processes of their own)")
+        files = list(dict.fromkeys(f for s in specs for f in s.params_files))
+        params = {f"{s.name}:{k}": v for s in specs for k, v in s.parameters.items()}
+        return cls(name, "fourws_bringup", "container", params_files=files, parameters=params,
+                   log_level=specs[0].log_level, nice=min(s.nice for s in specs),
+                   hosts=tuple(s.name for s in specs))
+
     def command(self) -> list[str]:
         program = self.argv or [str(executable_path(self.package, self.executable))]
-        cmd = [*program, "--ros-args", "-r",
-               f"__node:={self.name}", "--log-level", self.log_level]
+        if self.hosts:
+            cmd = [*program, "--nodes", ",".join(self.hosts), "--ros-args",
+                   "--log-level", self.log_level]
+        else:
+            cmd = [*program, "--ros-args", "-r",
+                   f"__node:={self.name}", "--log-level", self.log_level]
         for f in self.params_files:
             cmd += ["--params-file", str(f)]
         for k, v in self.parameters.items():
@@ -182,7 +214,7 @@ class Supervisor:
         try:
             for spec in self.specs:
                 self._spawn(spec)
-            self.wait_for_graph([s.name for s in self.specs], timeout_s)
+            self.wait_for_graph([n for s in self.specs for n in s.graph_names], timeout_s)
         except BaseException:
             self.stop()
             raise
@@ -236,7 +268,12 @@ class Supervisor:
         for name, proc in self.procs.items():
             rc = proc.popen.poll()
             if rc is not None:
-                raise NodeDied(name, rc, proc.last_lines())
+                raise NodeDied(self.describe(name), rc, proc.last_lines())
+
+    def describe(self, name: str) -> str:
+        """A process's name, with the nodes it hosts if it is a container."""
+        hosted = self.procs[name].spec.hosts
+        return f"{name} ({', '.join(hosted)})" if hosted else name
 
     def exited(self) -> dict[str, int]:
         """Nodes that have exited, with their exit codes."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -44,15 +44,27 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     A ``ValueError`` raised while building the node (a bad parameter) is reported in one line
     and gives exit code 2, so a supervisor can show why the node did not start.
     """
+    return run_nodes([factory], args)
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None) -> int:
+    """Several nodes in one process and one executor (a component container's job).
+
+    The nodes stay separate rclpy nodes with their own names, parameters and topics; they only
+    share the process, the DDS participant and the executor thread, so a message between two
+    of them takes no inter-process hop. Spins until shutdown or until any node sets ``done``;
+    the exit code is the first non-zero ``exit_code`` of a node, 2 for a bad parameter.
+    """
     rclpy.init(args=args)
-    node = None
+    nodes: list[Node] = []
     code = 0
     try:
         executor = make_executor()
-        node = factory()
-        executor.add_node(node)
+        for factory in factories:
+            nodes.append(factory())
+            executor.add_node(nodes[-1])
         # A node that ends by itself (the plant at the end of a scenario) sets ``done``.
-        while rclpy.ok() and not getattr(node, "done", False):
+        while rclpy.ok() and not any(getattr(n, "done", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -60,8 +72,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         print(f"[fatal] {exc}", file=sys.stderr, flush=True)
         code = 2
     finally:
-        if node is not None:
-            code = getattr(node, "exit_code", code) or code
+        for node in nodes:
+            code = code or getattr(node, "exit_code", 0) or 0
             node.destroy_node()
         rclpy.try_shutdown()
     return code
