@@ -10,8 +10,10 @@ OUT ?= runs/paper
 setup:
 	@bash tools/setup.sh
 
+COMPOSE ?= all
+
 run: setup
-	@$(ENV) && fourws paper --out $(OUT) --force
+	@$(ENV) && fourws paper --out $(OUT) --force --compose $(COMPOSE)
 
 lint: setup
 	@$(ENV) && ruff check .

@@ -7,8 +7,10 @@ Usage: python bench/bench_graph.py [OUT.json]   (default bench/results_graph.jso
    warm-up ones; half the median round trip is the floor of one stage of the lockstep chain
    (state → MPC → allocator → plant: three stages a step) on this machine, before any
    computation.
-2. ``run``: ``fourws run`` of improved on dlc_60_mu05 in lockstep with the recorder: the
-   real-time factor and ``step_latency_ms`` (per chain stage, from the bag).
+2. ``runs``: ``fourws run`` of improved on dlc_60_mu05 in lockstep with the recorder, once in
+   each process layout (``--compose none``, ``control``, ``all``; interleaved, ``ROUNDS``
+   rounds, since this shared machine's speed drifts within minutes): the real-time factor,
+   the MPC step inside the node and ``step_latency_ms`` (per chain stage, from the bag).
 
 Both run in a domain of their own (the supervisor's DomainLease). Needs the built
 workspace (``source ros_ws/env.sh``).
@@ -29,6 +31,8 @@ import numpy as np
 
 N_ROUND_TRIPS = 2_000
 N_WARMUP = 100
+LAYOUTS = ("none", "control", "all")
+ROUNDS = 2
 
 ECHO = textwrap.dedent("""
     import sys, time
@@ -93,17 +97,17 @@ def bench_hop() -> dict:
         rclpy.try_shutdown()
 
 
-def bench_run() -> dict:
+def bench_run(layout: str) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
         cmd = ["fourws", "run", "--scenario", "dlc_60_mu05", "--controller", "improved",
-               "--out", str(out), "--no-plots"]
+               "--out", str(out), "--no-plots", "--compose", layout]
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL,  # noqa: S603
                        stderr=subprocess.DEVNULL)
         m = json.loads((out / "metrics.json").read_text())
     keys = ("steps", "sim_time_s", "wall_time_s", "real_time_factor", "mpc_solve_ms_p50",
             "mpc_solve_ms_p99", "missing_steps", "step_latency_ms")
-    return {"run": "improved@dlc_60_mu05", **{k: m.get(k) for k in keys}}
+    return {"run": "improved@dlc_60_mu05", "compose": layout, **{k: m.get(k) for k in keys}}
 
 
 def main(out: str) -> int:
@@ -117,12 +121,16 @@ def main(out: str) -> int:
               f"(p90 {hop['round_trip_us_p90']:.0f}): {hop['stage_floor_ms']:.2f} ms per stage")
     finally:
         lease.release()
-    run = bench_run()
-    lat = run.get("step_latency_ms") or {}
-    print(f"run: RTF {run['real_time_factor']:.2f}, step median "
-          f"{lat.get('step', {}).get('p50', float('nan')):.2f} ms, MPC solve median "
-          f"{run['mpc_solve_ms_p50']:.2f} ms")
-    Path(out).write_text(json.dumps({"hop": hop, "run": run}, indent=2) + "\n")
+    runs = []
+    for _ in range(ROUNDS):
+        for layout in LAYOUTS:
+            run = bench_run(layout)
+            runs.append(run)
+            lat = run.get("step_latency_ms") or {}
+            print(f"run --compose {layout:7s}: RTF {run['real_time_factor']:.2f}, step median "
+                  f"{lat.get('step', {}).get('p50', float('nan')):.2f} ms, MPC step in the "
+                  f"node median {run['mpc_solve_ms_p50']:.2f} ms")
+    Path(out).write_text(json.dumps({"hop": hop, "runs": runs}, indent=2) + "\n")
     return 0
 
 

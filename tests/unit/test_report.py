@@ -190,3 +190,18 @@ def test_rankings_group_ties_within_one_percent_and_aborted_runs_rank_last():
     text = format_tables(res)
     assert ("fourws ampc_4ws_dyc ≈ improved < ampc_4ws; paper improved < ampc_4ws_dyc < "
             "ampc_4ws (same up to a tie within 1%: ampc_4ws_dyc ≈ improved)") in text
+
+
+def test_paper_exit_status_counts_broken_runs_not_aborted_ones():
+    """An aborted run (the car left the corridor: a result) keeps `fourws paper` at exit 0;
+    a dead node, missing metrics or steps missing from the bag make it fail, with the why."""
+    from fourws_bringup.paper import run_failure
+
+    aborted = {"completed": False, "reason": "aborted: lateral error +5.02 m beyond ±5 m",
+               "steps": 694, "missing_steps": 0}
+    assert run_failure(aborted) is None
+    assert run_failure({**aborted, "completed": True}) is None
+    assert "mpc_node" in run_failure({**aborted, "died": "mpc_node"})
+    assert "3 steps missing" in run_failure({**aborted, "missing_steps": 3})
+    assert "metrics failed" in run_failure({"completed": False,
+                                            "reason": "end; metrics failed: bad bag"})

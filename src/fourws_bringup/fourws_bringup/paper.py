@@ -332,4 +332,20 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
 
     write_report(out, results, tables, wall)
     print(f"report: {out / 'report.md'}")
-    return 0 if all(m.get("completed") for m in results.values()) else 1
+    failed = {f"{c}@{s}": why for (c, s), m in results.items() if (why := run_failure(m))}
+    for name, why in failed.items():
+        print(f"fourws paper: {name} failed: {why}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def run_failure(m: dict) -> str | None:
+    """Why a run gives no trustworthy result, or None. A run the scenario aborted (the car
+    left the ±5 m corridor, as MPC-FWS does on this plant) is a result, not a failure; a node
+    that died, metrics that could not be computed, or steps missing from the bag are."""
+    if m.get("died"):
+        return f"node {m['died']} died"
+    if "steps" not in m:
+        return m.get("reason", "no metrics")
+    if m.get("missing_steps"):
+        return f"{m['missing_steps']} steps missing from the bag"
+    return None

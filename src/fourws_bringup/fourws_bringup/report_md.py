@@ -51,7 +51,10 @@ def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
             f"{m.get('mpc_solve_ms_p99', float('nan')):.2f} | {m.get('deadline_misses', '')} | "
             f"{m.get('np_min', '')}..{m.get('np_max', '')} | "
             f"{m.get('nc_min', '')}..{m.get('nc_max', '')} |")
-    lines += ["", f"Total wall time of the {len(results)} runs: {wall_s:.0f} s.", ""]
+    layouts = sorted({str(m.get("compose", "none")) for m in results.values()})
+    lines += ["", f"Total wall time of the {len(results)} runs: {wall_s:.0f} s. Process layout "
+              f"(`--compose`): {', '.join(layouts)}; the layout changes the timing only, never "
+              "a recorded value.", ""]
     lines += [
         "## Where a step's wall time goes", "",
         "Median (p90) in ms per stage of the lockstep chain, from the recorder's receive "
