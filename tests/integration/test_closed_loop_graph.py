@@ -11,9 +11,9 @@ One module-scoped set of lockstep runs of the paper's 60 km/h, μ = 0.5 lane cha
 - replaying the recorded /vehicle/state and /reference/trajectory into a fresh mpc_node in
   lockstep reproduces the recorded /control/mpc_command to 1e-9;
 - ``fourws report`` recomputes metrics.json from the bag alone;
-- the same run with the MPC, PID and allocator composed in one container process
-  (``--compose control``), and with the plant in it too (``--compose all``), records the same
-  states and commands, exactly.
+- a run with the MPC, PID and allocator composed in one container process
+  (``--compose control``, mpc_4ws) or with the plant in it too (``--compose all``,
+  improved) records the same states, commands and torques as one process per node, exactly.
 """
 
 from __future__ import annotations
@@ -48,10 +48,12 @@ def runs(tmp_path_factory):
         folder = base / f"{c}@{SCENARIO}"
         metrics = run_and_score(SCENARIO, c, folder, plots=False, progress=False)
         out[c] = (folder, metrics)
-    for layout in ("control", "all"):
-        folder = base / f"improved@{SCENARIO}-{layout}"
-        out[f"improved-{layout}"] = (folder, run_and_score(
-            SCENARIO, "improved", folder, plots=False, progress=False, compose=layout))
+    # mpc_4ws's preset overrides the allocator's package default (method equal, not
+    # optimal): the composed run must keep that override.
+    for c, layout in (("mpc_4ws", "control"), ("improved", "all")):
+        folder = base / f"{c}@{SCENARIO}-{layout}"
+        out[f"{c}-{layout}"] = (folder, run_and_score(
+            SCENARIO, c, folder, plots=False, progress=False, compose=layout))
     return out
 
 
@@ -65,15 +67,17 @@ def test_every_run_is_recorded_whole_and_the_4ws_presets_complete(runs):
         assert runs[c][1]["completed"] and runs[c][1]["steps"] > 900, (c, runs[c][1]["reason"])
 
 
-@pytest.mark.parametrize(("layout", "container", "hosted"), [
-    ("control", "control_container", ("mpc_node", "speed_pid_node", "allocator_node")),
-    ("all", "node_container", ("plant_node", "mpc_node", "speed_pid_node", "allocator_node")),
+@pytest.mark.parametrize(("controller", "layout", "container", "hosted"), [
+    ("mpc_4ws", "control", "control_container",
+     ("mpc_node", "speed_pid_node", "allocator_node")),
+    ("improved", "all", "node_container",
+     ("plant_node", "mpc_node", "speed_pid_node", "allocator_node")),
 ])
-def test_composed_nodes_record_the_same_run(runs, layout, container, hosted):
+def test_composed_nodes_record_the_same_run(runs, controller, layout, container, hosted):
     """Hosting nodes in one container process changes the timing only: the lockstep answers
     are keyed by the state stamp, so every recorded state, command and torque equals the
     one-process-per-node run's bit for bit."""
-    (folder_c, m_c), (folder_s, m_s) = runs[f"improved-{layout}"], runs["improved"]
+    (folder_c, m_c), (folder_s, m_s) = runs[f"{controller}-{layout}"], runs[controller]
     assert m_c["compose"] == layout and m_s["compose"] == "none"
     assert m_c["completed"] and m_c["missing_steps"] == 0, m_c["reason"]
     logs = {p.name for p in (folder_c / "logs").iterdir()}
@@ -91,6 +95,7 @@ def test_composed_nodes_record_the_same_run(runs, layout, container, hosted):
                                       err_msg=key)
     np.testing.assert_array_equal(composed.wheel_torques["torque"],
                                   separate.wheel_torques["torque"])
+    assert set(composed.wheel_torques["allocation"]) == set(separate.wheel_torques["allocation"])
     for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m", "max_abs_sideslip_deg"):
         assert m_c[key] == m_s[key], key
 

@@ -25,9 +25,34 @@ def test_composed_spec_gives_each_node_exactly_its_own_parameters():
     assert cmd[1:3] == ["--nodes", "mpc_node,speed_pid_node,allocator_node"]
     assert not any(a.startswith("__node:=") for a in cmd), "a container must not rename nodes"
     files = [cmd[i + 1] for i, a in enumerate(cmd) if a == "--params-file"]
-    assert files == ["mpc.yaml", "preset.yaml", "pid.yaml", "alloc.yaml"]
+    assert sorted(files) == ["alloc.yaml", "mpc.yaml", "pid.yaml", "preset.yaml"]
+    for s in _specs():  # a later file overrides: each node's own order must hold
+        assert [f for f in files if f in s.params_files] == s.params_files, s.name
     rules = [cmd[i + 1] for i, a in enumerate(cmd) if a == "-p"]
     assert rules == ["allocator_node:sync:=lockstep"]
+
+
+def test_parameter_files_whose_orders_contradict_cannot_be_composed():
+    a = NodeSpec("mpc_node", "fourws_mpc", "mpc_node", params_files=["x.yaml", "y.yaml"])
+    b = NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
+                 params_files=["y.yaml", "x.yaml"])
+    with pytest.raises(ValueError, match="contradict"):
+        NodeSpec.compose("c", [a, b])
+
+
+def test_a_composed_node_gets_the_preset_over_its_package_defaults(tmp_path):
+    """The real files: mpc_4ws's preset sets the allocator's method to 'equal' over
+    allocator.yaml's 'optimal'; the container must be given them in that order too."""
+    from fourws_bringup.runner import graph_specs
+
+    for layout in ("control", "all"):
+        (box,) = [s for s in graph_specs("dlc_60_mu05", "mpc_4ws", None, compose=layout)
+                  if s.hosts]
+        files = box.params_files
+        alloc = next(f for f in files if f.endswith("allocator.yaml"))
+        preset = next(f for f in files if f.endswith("mpc_4ws.yaml"))
+        mpc = next(f for f in files if f.endswith("mpc.yaml"))
+        assert files.index(alloc) < files.index(preset) and files.index(mpc) < files.index(preset)
 
 
 def test_a_plain_spec_keeps_its_node_name_remap():

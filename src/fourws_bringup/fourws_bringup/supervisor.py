@@ -88,9 +88,11 @@ class NodeSpec:
     def compose(cls, name: str, specs: list[NodeSpec]) -> NodeSpec:
         """One ``fourws_bringup/container`` process hosting the nodes of ``specs``.
 
-        Parameter files are passed once each (their sections are keyed by node name) and each
-        spec's ``parameters`` become node-qualified (``-p allocator_node:sync:=lockstep``), so
-        every node gets exactly the parameters it would get in a process of its own.
+        Parameter files are passed once each (their sections are keyed by node name), in an
+        order that keeps every spec's own order, since a later file overrides an earlier one
+        (``allocator.yaml`` then the controller preset); each spec's ``parameters`` become
+        node-qualified (``-p allocator_node:sync:=lockstep``). So every node gets exactly the
+        parameters it would get in a process of its own; ValueError if no single order can.
         """
         if not specs:
             raise ValueError(f"{name}: a container needs at least one node")
@@ -98,7 +100,7 @@ class NodeSpec:
         if bad:
             raise ValueError(f"{name}: cannot host {bad} (containers, custom programs, "
                              "remappings and extra arguments stay processes of their own)")
-        files = list(dict.fromkeys(f for s in specs for f in s.params_files))
+        files = _merge_orders([s.params_files for s in specs], name)
         params = {f"{s.name}:{k}": v for s in specs for k, v in s.parameters.items()}
         return cls(name, "fourws_bringup", "container", params_files=files, parameters=params,
                    log_level=specs[0].log_level, nice=min(s.nice for s in specs),
@@ -119,6 +121,24 @@ class NodeSpec:
         for src, dst in self.remappings.items():
             cmd += ["-r", f"{src}:={dst}"]
         return cmd + list(self.extra_args)
+
+
+def _merge_orders(orders: list[list[str]], what: str) -> list[str]:
+    """One list holding every item once, each input's order kept (a topological sort, ties
+    broken by first appearance); ValueError naming ``what`` if the orders contradict."""
+    items = list(dict.fromkeys(x for order in orders for x in order))
+    after: dict[str, set[str]] = {x: set() for x in items}  # x → items that must precede x
+    for order in orders:
+        for i, x in enumerate(order):
+            after[x].update(y for y in order[:i] if y != x)
+    out: list[str] = []
+    while len(out) < len(items):
+        ready = [x for x in items if x not in out and after[x] <= set(out)]
+        if not ready:
+            raise ValueError(f"{what}: the parameter files' orders contradict each other: "
+                             f"{orders}")
+        out.append(ready[0])
+    return out
 
 
 def _param_literal(v: object) -> str:
