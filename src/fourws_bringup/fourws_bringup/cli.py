@@ -17,6 +17,8 @@ from pathlib import Path
 
 from fourws_common.resources import config_dir
 
+from .runner import COMPOSE_LAYOUTS
+
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from .paper import run_and_score
@@ -86,7 +88,7 @@ def _cmd_list(kind: str) -> int:
     return 0
 
 
-COMPOSE_CHOICES = ("none", "control", "all")  # fourws_bringup.runner.COMPOSE_LAYOUTS
+COMPOSE_CHOICES = tuple(COMPOSE_LAYOUTS)
 COMPOSE_HELP = ("process layout: none (one process per node), control (MPC, speed PID and "
                 "allocator in one container process) or all (the plant too); same nodes, "
                 "parameters, topics and results, fewer processes to wake each step")
