@@ -15,9 +15,11 @@ import sys
 from collections.abc import Callable, Sequence
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.task import Future
 
 #: Environment variable that picks the executor: ``events`` (default) or ``single``.
 EXECUTOR_ENV = "FOURWS_EXECUTOR"
@@ -25,6 +27,8 @@ EXECUTORS: dict[str, Callable[[], Executor]] = {
     "events": EventsExecutor,
     "single": SingleThreadedExecutor,
 }
+#: Wall period (s, steady clock) at which ``run_nodes`` checks whether a node has set ``done``.
+DONE_POLL_PERIOD_S = 0.02
 
 
 def make_executor(name: str | None = None) -> Executor:
@@ -63,9 +67,19 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         for factory in factories:
             nodes.append(factory())
             executor.add_node(nodes[-1])
-        # A node that ends by itself (the plant at the end of a scenario) sets ``done``.
-        while rclpy.ok() and not any(getattr(n, "done", False) for n in nodes):
-            executor.spin_once(timeout_sec=0.1)
+        # A node that ends by itself (the plant at the end of a scenario) sets ``done``; a
+        # steady-clock timer notices it, so the executor's loop runs in C++ without a return
+        # to Python after every callback (spin_once costs ~13 µs more per callback).
+        stop = Future()
+
+        def poll_done() -> None:
+            if not stop.done() and any(getattr(n, "done", False) for n in nodes):
+                stop.set_result(True)
+
+        nodes[0].create_timer(DONE_POLL_PERIOD_S, poll_done,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        while rclpy.ok() and not stop.done():
+            executor.spin_until_future_complete(stop, timeout_sec=1.0)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as exc:

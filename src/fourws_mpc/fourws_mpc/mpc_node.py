@@ -39,6 +39,9 @@ class MpcNode(Node):
         self.wait_log = RateLimitedLog(self.get_logger().warning, period_s=5.0)
         self.fallback_log = RateLimitedLog(self.get_logger().warning)
         self.pub_cmd = self.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+        # Built once, every field refilled per step (publish serialises at once); they are
+        # also the cached answer to a republished state.
+        self._cmd_msg, self._diag_msg = MpcCommand(), MpcDiagnostics()
         self.pub_diag = self.create_publisher(MpcDiagnostics, "/control/mpc_diagnostics",
                                               CONTROL_QOS)
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
@@ -80,17 +83,18 @@ class MpcNode(Node):
         res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref,
                              mu=mu if np.isfinite(mu) and mu > 0.0 else None)
         solve_ms = (time.perf_counter() - t0) * 1e3
-        cmd = MpcCommand(delta_front=res.delta_front, delta_rear=res.delta_rear,
-                         yaw_moment=res.yaw_moment)
-        cmd.header = msg.header
-        diag = MpcDiagnostics(
-            controller=res.controller, np=int(res.np), nc=int(res.nc), q_y=res.q_y,
-            q_phi=res.q_phi, r_ddelta=res.r_ddelta, r_dmz=res.r_dmz,
-            lateral_error=res.lateral_error, heading_error=res.heading_error, e_s=res.e_s,
-            k_e=res.k_e, k_u=res.k_u, solve_time_ms=solve_ms,
-            solver_status=res.solver_status, iterations=int(res.iterations),
-            slack=res.slack, fallback=bool(res.fallback))
-        diag.header = msg.header
+        cmd, diag = self._cmd_msg, self._diag_msg
+        cmd.header = diag.header = msg.header
+        cmd.delta_front, cmd.delta_rear = res.delta_front, res.delta_rear
+        cmd.yaw_moment = res.yaw_moment
+        diag.controller, diag.np, diag.nc = res.controller, int(res.np), int(res.nc)
+        diag.q_y, diag.q_phi, diag.r_ddelta, diag.r_dmz = (res.q_y, res.q_phi, res.r_ddelta,
+                                                           res.r_dmz)
+        diag.lateral_error, diag.heading_error = res.lateral_error, res.heading_error
+        diag.e_s, diag.k_e, diag.k_u = res.e_s, res.k_e, res.k_u
+        diag.solve_time_ms, diag.solver_status = solve_ms, res.solver_status
+        diag.iterations, diag.slack = int(res.iterations), res.slack
+        diag.fallback = bool(res.fallback)
         if res.fallback:
             self.fallback_log(stamp_ns, f"solver '{res.solver_status}' at {stamp_ns} ns: "
                               "used the previous plan")

@@ -52,6 +52,7 @@ class AllocatorNode(Node):
         self.last_valid = np.zeros(4)
         self.reject_log = RateLimitedLog(self.get_logger().warning)
         self.pub = self.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
+        self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
         self.create_subscription(VehicleState, "/vehicle/state",
                                  lambda m: self._on_input(self.states, m), CONTROL_QOS)
         self.create_subscription(DriveCommand, "/control/drive_command",
@@ -88,9 +89,10 @@ class AllocatorNode(Node):
 
     def _answer(self, stamp_ns: int, state: VehicleState, drive: DriveCommand,
                 mpc: MpcCommand) -> None:
-        out = WheelTorques()
+        out = self._out_msg
         out.header = drive.header
         out.allocation = self.params.config.method
+        out.unmet_torque = out.unmet_yaw_moment = 0.0
         try:
             res = self.alloc.allocate(drive.torque, mpc.yaw_moment,
                                       np.asarray(state.fz), np.asarray(state.fy),

@@ -35,6 +35,7 @@ class SpeedPidNode(Node):
         self.reject_log = RateLimitedLog(self.get_logger().warning)
         self.wait_log = RateLimitedLog(self.get_logger().warning, period_s=5.0)
         self.pub = self.create_publisher(DriveCommand, "/control/drive_command", CONTROL_QOS)
+        self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
                                  LATCHED_QOS)
         self.create_subscription(VehicleState, "/vehicle/state", self._on_state, CONTROL_QOS)
@@ -74,8 +75,8 @@ class SpeedPidNode(Node):
             return
         v_ref, a_ref = self.profile.at(msg.x, msg.y)
         out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
-        cmd = DriveCommand(force=out.force_n, torque=out.torque_nm)
-        cmd.header = msg.header
+        cmd = self._cmd_msg
+        cmd.header, cmd.force, cmd.torque = msg.header, out.force_n, out.torque_nm
         self.last_stamp_ns, self.cached = stamp_ns, cmd
         self.pub.publish(cmd)
 

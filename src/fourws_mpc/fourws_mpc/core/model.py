@@ -46,6 +46,7 @@ import numpy as np
 
 N_STATE = 6
 N_INPUT = 3
+_EYE_STATE = np.eye(N_STATE)
 
 
 class StateIdx(IntEnum):
@@ -175,7 +176,7 @@ def discretise(
     A_k = I + T A_t (6, 6), B_k = T B_t (6, 3), d_k = T (f0 − A_t ζ0 − B_t u0) (6,).
     """
     f0, At, Bt = jacobians(zeta0, u0, p)
-    Ak = np.eye(N_STATE) + dt_s * At
+    Ak = _EYE_STATE + dt_s * At
     Bk = dt_s * Bt
     dk = dt_s * (f0 - At @ zeta0 - Bt @ u0)
     return Ak, Bk, dk

@@ -124,7 +124,7 @@ class Reference:
         dx, dy = self.x[lo + 1:hi + 1] - x0, self.y[lo + 1:hi + 1] - y0
         L2 = dx * dx + dy * dy
         rx, ry = px - x0, py - y0
-        t = np.clip((rx * dx + ry * dy) / L2, 0.0, 1.0)
+        t = np.minimum(np.maximum((rx * dx + ry * dy) / L2, 0.0), 1.0)
         ex, ey = rx - t * dx, ry - t * dy
         k = int(np.argmin(ex * ex + ey * ey))
         i = lo + k
