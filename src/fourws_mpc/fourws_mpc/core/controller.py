@@ -377,7 +377,7 @@ class MpcController:
     def reset(self, u_prev: np.ndarray | None = None) -> None:
         """Forget the past: u(k−1) (default zeros), plan, horizons, reference index."""
         u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).copy()
-        self.u_prev = np.where(self._enabled, np.minimum(np.maximum(u, -self._u_max), self._u_max), 0.0)
+        self.u_prev = np.where(self._enabled, np.clip(u, -self._u_max, self._u_max), 0.0)
         self.du_last = np.zeros(N_INPUT)
         self.plan_u: np.ndarray | None = None
         self.plan_du_scaled: np.ndarray | None = None
