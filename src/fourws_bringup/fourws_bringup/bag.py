@@ -43,6 +43,9 @@ DELIMITER = "=" * 80
 ROSBAG2_VERSION = 9
 ROS_DISTRO = "jazzy"
 INFINITE_DURATION = {"sec": 9223372036, "nsec": 854775807}  # RMW_DURATION_INFINITE
+#: libyaml's emitter when PyYAML has it (same text, ~5x faster: metadata.yaml is rewritten
+#: after every chunk by the recorder), else the pure-Python one.
+_YAML_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class BagError(Exception):
@@ -313,8 +316,8 @@ def write_metadata(folder: str | Path, *, relative_file_paths: list[str],
     info = build_metadata(relative_file_paths=relative_file_paths, topics=topics,
                           starting_time_ns=starting_time_ns, duration_ns=duration_ns,
                           custom_data=custom_data)
-    text = yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False,
-                          default_flow_style=False)
+    text = yaml.dump({"rosbag2_bagfile_information": info}, Dumper=_YAML_DUMPER,
+                     sort_keys=False, default_flow_style=False)
     path = folder / "metadata.yaml"
     tmp = folder / ".metadata.yaml.tmp"
     tmp.write_text(text, encoding="utf-8")

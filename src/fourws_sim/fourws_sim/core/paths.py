@@ -411,9 +411,9 @@ def nearest_index(path: ReferencePath, x: float, y: float) -> int:
     return int(np.argmin((path.x - x) ** 2 + (path.y - y) ** 2))
 
 
-def lateral_error(path: ReferencePath, x: float, y: float) -> float:
+def lateral_error(path: ReferencePath, x: float, y: float, index: int | None = None) -> float:
     """Signed lateral offset of (x, y) from the path at its nearest point, m, left positive
-    (projection on the nearest sample's normal)."""
-    i = nearest_index(path, x, y)
+    (projection on the nearest sample's normal); ``index``: that point's index if known."""
+    i = nearest_index(path, x, y) if index is None else index
     yaw = path.yaw[i]
     return float(-(x - path.x[i]) * math.sin(yaw) + (y - path.y[i]) * math.cos(yaw))

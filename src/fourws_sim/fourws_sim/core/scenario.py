@@ -94,7 +94,8 @@ class Scenario:
         """(done, reason). Normal ends: end_x_m reached, duration reached, end of the path;
         aborts (reason starts with ``"aborted:"``): |lateral error| or |sideslip| beyond the
         abort limits. (False, "") while the run goes on."""
-        e = lateral_error(self.path, out.x, out.y)
+        i = nearest_index(self.path, out.x, out.y)
+        e = lateral_error(self.path, out.x, out.y, i)
         if abs(e) > self.abort_lateral_error_m:
             return True, (f"aborted: lateral error {e:+.2f} m beyond "
                           f"±{self.abort_lateral_error_m:g} m")
@@ -106,7 +107,7 @@ class Scenario:
         if self.duration_s is not None and out.t_s >= self.duration_s - 1e-9:
             return True, (f"end of scenario: t = {out.t_s:.2f} s ≥ "
                           f"duration_s = {self.duration_s:g} s")
-        if nearest_index(self.path, out.x, out.y) >= len(self.path) - 1:
+        if i >= len(self.path) - 1:
             return True, "end of scenario: end of the reference path reached"
         return False, ""
 
