@@ -59,6 +59,24 @@ def test_crashing_node_is_reported_by_name_and_the_others_are_stopped(graph):
     assert not pid_alive(talker_pid)
 
 
+def test_a_node_that_sets_done_ends_its_process_with_its_exit_code(graph, ros):
+    """run_nodes notices ``done`` on the steady clock (the node runs on sim time, no /clock),
+    stops the second node of the process with it and exits with the node's exit code."""
+    sup = graph([NodeSpec(**script_node("finisher.py", "finisher"))])
+    pub = ros.node.create_publisher(MpcCommand, "finish", 10)
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= 1, 20.0)
+    pid = sup.procs["finisher"].popen.pid
+    with pytest.raises(NodeDied) as info:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            pub.publish(MpcCommand(delta_front=4.0))
+            ros.spin_until(lambda: False, 0.05)
+            sup.check()
+    assert info.value.name == "finisher"
+    assert info.value.returncode == 4
+    assert not pid_alive(pid)
+
+
 def test_node_that_never_appears_times_out_naming_it(graph):
     with pytest.raises(GraphTimeout) as info:
         graph([NodeSpec(**script_node("talker.py", "talker")),
