@@ -165,13 +165,14 @@ class PlantNode(Node):
                         f"the last valid steer command {self.steer_cmd}")
         return False
 
-    def _valid_torques(self, msg: WheelTorques) -> bool:
-        t = np.asarray(msg.torque, dtype=float)
+    def _valid_torques(self, msg: WheelTorques) -> np.ndarray | None:
+        """The message's torques as a new (4,) array, N·m, or None (logged) if not finite."""
+        t = np.array(msg.torque, dtype=float)
         if t.shape == (4,) and np.all(np.isfinite(t)):
-            return True
+            return t
         self.reject_log(self._now_ns(), f"rejected non-finite wheel_torques {t.tolist()}; "
                         f"holding the last valid torques")
-        return False
+        return None
 
     def _on_mpc(self, msg: MpcCommand) -> None:
         if self.ended:
@@ -191,8 +192,8 @@ class PlantNode(Node):
         if self.ended:
             return
         if self.params.config.mode == "realtime":
-            if self._valid_torques(msg):
-                self.torque_cmd = np.asarray(msg.torque, dtype=float).copy()
+            if (t := self._valid_torques(msg)) is not None:
+                self.torque_cmd = t
             return
         if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
             self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped "
@@ -207,8 +208,8 @@ class PlantNode(Node):
             return
         if self._valid_cmd(self.pending_cmd):
             self.steer_cmd = (self.pending_cmd.delta_front, self.pending_cmd.delta_rear)
-        if self._valid_torques(self.pending_torque):
-            self.torque_cmd = np.asarray(self.pending_torque.torque, dtype=float).copy()
+        if (t := self._valid_torques(self.pending_torque)) is not None:
+            self.torque_cmd = t
         self.pending_cmd = None
         self.pending_torque = None
         self._advance()
