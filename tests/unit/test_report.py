@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 
 from fourws_bringup.bag import BagError, RunData
-from fourws_bringup.core.metrics import compute_metrics
+from fourws_bringup.core.closed_loop import load_allocator_config
+from fourws_bringup.core.metrics import (
+    allocate_series,
+    compute_metrics,
+    rear_load_ratio_share,
+    tyre_usage,
+)
 from fourws_bringup.report import (
+    allocation_audit,
     draw_comparison,
     draw_figures,
     figures_markdown,
@@ -205,3 +212,72 @@ def test_paper_exit_status_counts_broken_runs_not_aborted_ones():
     assert "3 steps missing" in run_failure({**aborted, "missing_steps": 3})
     assert "metrics failed" in run_failure({"completed": False,
                                             "reason": "end; metrics failed: bad bag"})
+
+
+def _allocation_run(method: str, n: int = 50) -> RunData:
+    """make_run with drive commands and the wheel torques ``method`` gives on its inputs."""
+    run = make_run(n)
+    s = run.state
+    k = np.arange(n)
+    s["fz"] = np.column_stack([2400.0 - k, 1500.0 + k, 2100.0 - k, 1300.0 + k])
+    s["fy"] = np.tile([-500.0, -400.0, -600.0, -450.0], (n, 1))
+    s["fx"] = np.tile([150.0, -60.0, 120.0, -50.0], (n, 1))
+    run.drive_command = {"stamp_ns": s["stamp_ns"], "t_s": s["t_s"],
+                         "torque": np.linspace(0.0, 60.0, n)}
+    cfg = load_allocator_config(None)
+    torque = allocate_series(method, run.drive_command["torque"],
+                             run.mpc_command["yaw_moment"], s["fz"], s["fy"], s["mu"], cfg)
+    run.wheel_torques = {"stamp_ns": s["stamp_ns"], "t_s": s["t_s"], "torque": torque,
+                         "allocation": np.array([method] * n, dtype=object)}
+    return run
+
+
+def test_rear_load_ratio_share_is_half_for_equal_loads_and_follows_mu_fz_squared():
+    fz = np.array([[1800.0, 1800.0, 1800.0, 1800.0], [2000.0, 1000.0, 1000.0, 1000.0]])
+    mu = np.array([[0.5] * 4, [0.5, 0.5, 0.5, 1.0]])
+    share = rear_load_ratio_share(fz, mu)
+    assert share[0] == pytest.approx([0.5, 0.5])
+    assert share[1] == pytest.approx([1000.0**2 / (2000.0**2 + 1000.0**2), 4.0 / 5.0])
+    assert np.isnan(rear_load_ratio_share(np.zeros((1, 4)), np.ones((1, 4)))).all()
+
+
+def test_tyre_usage_is_eq_25():
+    eta = tyre_usage(np.array([[300.0, 0, 0, 0]]), np.array([[400.0, 900.0, 0, 0]]),
+                     np.full((1, 4), 1000.0), np.array([[1.0, 1.0, 0.5, 0.5]]))
+    assert eta[0] == pytest.approx([0.5, 0.9, 0.0, 0.0])
+
+
+def test_allocation_series_satisfies_eq_27_and_the_rule_splits_each_side_in_half():
+    cfg = load_allocator_config(None)
+    run = _allocation_run("optimal")
+    s, t, mz = run.state, run.drive_command["torque"], run.mpc_command["yaw_moment"]
+    for method in ("optimal", "rule"):
+        w = allocate_series(method, t, mz, s["fz"], s["fy"], s["mu"], cfg)
+        assert w.sum(axis=1) == pytest.approx(t)
+        b_2r = cfg.track_width_m / (2.0 * cfg.wheel_radius_m)
+        assert b_2r * (-w[:, 0] + w[:, 1] - w[:, 2] + w[:, 3]) == pytest.approx(mz)
+    rule = allocate_series("rule", t, mz, s["fz"], s["fy"], s["mu"], cfg)
+    assert rule[:, 0] == pytest.approx(rule[:, 2]) and rule[:, 1] == pytest.approx(rule[:, 3])
+
+
+def test_allocation_audit_replays_the_recorded_method_and_compares_the_other():
+    run = _allocation_run("optimal")
+    audit = allocation_audit(run, other="rule")
+    assert audit["method"] == "optimal" and audit["steps"] == 50
+    assert audit["replay_error_nm"] == 0.0
+    share = rear_load_ratio_share(run.state["fz"], run.state["mu"])
+    assert audit["rear_share_min"] == pytest.approx(share.min())
+    sums = run.wheel_torques["torque"][:, [0, 2]].sum(axis=1)
+    # optimal differs from rule by |S_L| · |w_rear − 1/2| on the left (and likewise right)
+    gap_left = np.abs(sums * (share[:, 0] - 0.5))
+    assert audit["max_difference_nm"] >= gap_left.max() - 1e-9
+    assert audit["max_tyre_usage"] == pytest.approx(
+        tyre_usage(run.state["fx"], run.state["fy"], run.state["fz"], run.state["mu"]).max())
+    run.wheel_torques["torque"] = run.wheel_torques["torque"] + 1.0
+    assert allocation_audit(run)["replay_error_nm"] == pytest.approx(1.0)
+
+
+def test_allocation_audit_names_the_missing_topic():
+    run = make_run(20)  # no drive commands recorded
+    with pytest.raises(BagError, match="drive_command"):
+        allocation_audit(run)

@@ -121,6 +121,55 @@ def series_of(run: RunData) -> Series:
                   ref_heading, ref_xy, run.mpc_diagnostics, torque_t, torque, mz_t, mz)
 
 
+def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, Any]:
+    """The lower layer of a recorded run, re-run from the bag (``core.metrics``).
+
+    For every stamp with a state, a drive command, an MPC command and wheel torques:
+    ``replay_error_nm`` is the largest |recorded − recomputed| wheel torque with the recorded
+    method (0 when the allocator did what its core says); ``max``/``median_difference_nm``
+    compare it with method ``other`` (largest per-wheel |ΔT| per step); ``rear_share_min``/
+    ``_max`` bound the load-ratio share of eq. (26)-(31); ``max_tyre_usage`` is the largest
+    η of eq. (25) from the recorded tyre forces; ``max_abs_yaw_moment_nm`` the largest |M_z|.
+    ``cfg`` (geometry and limits; the method is the recorded one) defaults to the package's
+    ``allocator.yaml``. Raises :class:`BagError` when the bag lacks a topic the audit needs.
+    """
+    from .core.closed_loop import load_allocator_config
+    from .core.metrics import allocate_series, rear_load_ratio_share, tyre_usage
+
+    cfg = cfg or load_allocator_config(None)
+    s, d, c, w = run.state, run.drive_command, run.mpc_command, run.wheel_torques
+    for topic, cols, key in (("/vehicle/state", s, "fz"), ("/control/drive_command", d, "torque"),
+                             ("/control/mpc_command", c, "yaw_moment"),
+                             ("/control/wheel_torques", w, "torque")):
+        if not len(cols.get("stamp_ns", ())) or key not in cols:
+            raise BagError(f"{run.path}: no {topic} messages; the allocation audit needs them")
+    stamps = w["stamp_ns"]
+    idx = {name: _align(cols["stamp_ns"], stamps) for name, cols in (("s", s), ("d", d),
+                                                                     ("c", c))}
+    ok = (idx["s"] >= 0) & (idx["d"] >= 0) & (idx["c"] >= 0)
+    if not ok.any():
+        raise BagError(f"{run.path}: no step has all four allocation topics")
+    i_s, i_d, i_c = (idx[k][ok] for k in ("s", "d", "c"))
+    fz, fy, mu = (np.asarray(s[k], float).reshape(-1, 4)[i_s] for k in ("fz", "fy", "mu"))
+    t, mz = np.asarray(d["torque"], float)[i_d], np.asarray(c["yaw_moment"], float)[i_c]
+    method = str(w["allocation"][ok][-1])
+    recorded = np.asarray(w["torque"], float).reshape(-1, 4)[ok]
+    mine = allocate_series(method, t, mz, fz, fy, mu, cfg)
+    theirs = allocate_series(other, t, mz, fz, fy, mu, cfg)
+    diff = np.abs(mine - theirs).max(axis=1)
+    share = rear_load_ratio_share(fz, mu)
+    eta = tyre_usage(np.asarray(s["fx"], float).reshape(-1, 4), s["fy"], s["fz"], s["mu"])
+    return {
+        "method": method, "other": other, "steps": int(ok.sum()),
+        "replay_error_nm": float(np.abs(recorded - mine).max()),
+        "max_difference_nm": float(diff.max()),
+        "median_difference_nm": float(np.median(diff)),
+        "rear_share_min": float(np.nanmin(share)), "rear_share_max": float(np.nanmax(share)),
+        "max_tyre_usage": float(np.nanmax(eta[np.isfinite(eta)])),
+        "max_abs_yaw_moment_nm": float(np.abs(mz).max()),
+    }
+
+
 def _align(src_stamps: np.ndarray | None, dst_stamps: np.ndarray) -> np.ndarray | None:
     if src_stamps is None or not len(src_stamps):
         return None

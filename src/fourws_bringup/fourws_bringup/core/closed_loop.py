@@ -107,12 +107,14 @@ def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) ->
     return MpcConfig.from_mapping(values)
 
 
-def load_allocator_config(controller: str) -> AllocatorConfig:
-    """allocator.yaml with the preset's ``allocator_node`` section merged over it."""
+def load_allocator_config(controller: str | None) -> AllocatorConfig:
+    """allocator.yaml with the preset's ``allocator_node`` section merged over it (the file
+    alone for ``None``)."""
     values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
                                   "allocator_node")
-    values.update(load_ros_params_yaml(str(controller_preset_path(controller)),
-                                       "allocator_node"))
+    if controller is not None:
+        values.update(load_ros_params_yaml(str(controller_preset_path(controller)),
+                                           "allocator_node"))
     return from_mapping(AllocatorConfig, values)
 
 

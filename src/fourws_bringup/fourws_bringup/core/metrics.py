@@ -12,6 +12,13 @@ Definitions (n steps, errors e_k)::
 Angles are reported in degrees (keys ``*_deg``). ``mpc_solve_ms_p50``/``_p99`` are the 50th
 and 99th percentiles (linear interpolation) of the per-step MPC solve times; NaN when no time
 was measured.
+
+Allocation audit (:func:`allocate_series`, :func:`rear_load_ratio_share`,
+:func:`tyre_usage`): the lower layer re-run on a run's recorded demands and wheel states.
+With B_f = B_r, eq. (27) fixes each side's torque sum, S_L = T/2 − M_z r/B and
+S_R = T/2 + M_z r/B; eq. (26)-(31) only chooses the front/rear split of each sum, giving the
+rear wheel the share w = c_r²/(c_f² + c_r²), c_i = μ_i F_zi, where the rule-based baseline
+gives 1/2. Tyre usage is eq. (25), η_i = √(F_xi² + F_yi²)/(μ_i F_zi).
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fourws_mpc.core.reference import Reference
+from fourws_torque_alloc.core.allocation import AllocatorConfig, WheelIndex, allocate
 
 METRIC_KEYS = (
     "max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
@@ -107,3 +115,39 @@ def run_metrics(ref: Reference, t: Sequence[float], x: Sequence[float], y: Seque
     out["steps"] = int(tt.size)
     out["sim_time_s"] = float(tt[-1] - tt[0]) if tt.size else 0.0
     return out
+
+
+def allocate_series(method: str, torque_nm: Sequence[float], yaw_moment_nm: Sequence[float],
+                    fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
+                    cfg: AllocatorConfig) -> np.ndarray:
+    """Wheel torques (n, 4) N·m, FL FR RL RR, that allocation ``method`` gives for each step's
+    total torque and yaw moment (n,) N·m and wheel loads, lateral forces (n, 4) N and μ (n, 4).
+    Raises ``ValueError`` as the allocator core does on a bad step."""
+    t = np.asarray(torque_nm, float).reshape(-1)
+    mz = np.asarray(yaw_moment_nm, float).reshape(-1)
+    fz, fy, m = (np.asarray(a, float).reshape(-1, 4) for a in (fz_n, fy_n, mu))
+    out = np.empty((t.size, 4))
+    for k in range(t.size):
+        out[k] = allocate(method, float(t[k]), float(mz[k]), fz[k], fy[k], m[k],
+                          cfg).torque_nm
+    return out
+
+
+def rear_load_ratio_share(fz_n: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Share of each side's torque sum that eq. (26)-(31) gives the rear wheel, (n, 2) for
+    the left and right side: c_r²/(c_f² + c_r²) with c_i = μ_i F_zi (NaN where both are 0)."""
+    c = np.asarray(mu, float).reshape(-1, 4) * np.asarray(fz_n, float).reshape(-1, 4)
+    c2 = c * c
+    front = c2[:, [WheelIndex.FL, WheelIndex.FR]]
+    rear = c2[:, [WheelIndex.RL, WheelIndex.RR]]
+    total = front + rear
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0.0, rear / total, np.nan)
+
+
+def tyre_usage(fx_n: np.ndarray, fy_n: np.ndarray, fz_n: np.ndarray,
+               mu: np.ndarray) -> np.ndarray:
+    """Tyre load ratio η (n, 4) of eq. (25); inf for a loaded tyre on μ = 0, NaN in the air."""
+    fx, fy, fz, m = (np.asarray(a, float).reshape(-1, 4) for a in (fx_n, fy_n, fz_n, mu))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.hypot(fx, fy) / (m * np.maximum(fz, 0.0))
