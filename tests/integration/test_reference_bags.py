@@ -14,7 +14,7 @@ import pytest
 
 from fourws_bringup.bag import read_run
 from fourws_bringup.core.closed_loop import load_allocator_config
-from fourws_bringup.paper import PAPER_RUNS, metrics_from_run
+from fourws_bringup.paper import PAPER_RUNS, allocation_note, metrics_from_run
 from fourws_bringup.report import allocation_audit
 
 BAGS = Path(__file__).resolve().parents[2] / "bags"
@@ -72,3 +72,16 @@ def test_table_8_allocation_step_is_only_a_front_rear_split(name, other):
     assert audit["max_difference_nm"] / radius_m < 0.05 * friction_n, (audit, friction_n)
     assert 100.0 < audit["max_abs_yaw_moment_nm"] < 500.0, audit
     assert audit["max_tyre_usage"] < 0.8, audit
+
+
+def test_paper_output_explains_the_allocation_step_from_the_bag(tmp_path):
+    """``fourws paper`` prints the audit under Table 8 with the bag's numbers; a run folder
+    without a bag gives a note that says so, and a results set without the run gives none."""
+    key = ("improved", "dlc_60_mu05")
+    audit = allocation_audit(read_run(BAGS / "improved@dlc_60_mu05"), other="rule")
+    note = allocation_note(BAGS, {key: {}})
+    assert f"{audit['max_difference_nm']:.1f} N·m" in note
+    assert f"{100 * audit['rear_share_min']:.1f}-{100 * audit['rear_share_max']:.1f} %" in note
+    missing = allocation_note(tmp_path, {key: {}})
+    assert "not available" in missing and "improved@dlc_60_mu05" in missing
+    assert allocation_note(BAGS, {("mpc_4ws", "dlc_60_mu05"): {}}) == ""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -86,10 +87,15 @@ def test_node_that_never_appears_times_out_naming_it(graph):
 
 
 def test_sigint_to_the_supervisor_leaves_no_process_behind(domain_id, tmp_path):
-    """A supervisor process running a graph gets SIGINT: afterwards no node process exists."""
+    """A supervisor process running a graph gets SIGINT: afterwards no node process exists.
+
+    The supervisor process takes SIGINT as a terminal gives it (KeyboardInterrupt), also when
+    this suite runs as a background job, which a non-interactive shell starts with SIGINT
+    ignored (an ignored signal stays ignored across exec)."""
     here = os.path.dirname(__file__)
     prog = textwrap.dedent(f"""
-        import sys, time
+        import signal, sys, time
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         sys.path.insert(0, {here!r})
         from conftest import script_node
         from fourws_bringup.supervisor import NodeSpec, Supervisor
@@ -110,15 +116,29 @@ def test_sigint_to_the_supervisor_leaves_no_process_behind(domain_id, tmp_path):
     """)
     proc = subprocess.Popen([sys.executable, "-c", prog], stdout=subprocess.PIPE, text=True)
     pids: list[int] = []
-    for line in proc.stdout:
-        if line.startswith("PIDS"):
-            pids = [int(p) for p in line.split()[1:]]
-            break
-    assert len(pids) == 2 and all(pid_alive(p) for p in pids)
-    proc.send_signal(signal.SIGINT)
-    out, _ = proc.communicate(timeout=30)
-    assert "STOPPED" in out
-    assert not [p for p in pids if pid_alive(p)], "node processes survived SIGINT"
+    try:
+        for line in proc.stdout:
+            if line.startswith("PIDS"):
+                pids = [int(p) for p in line.split()[1:]]
+                break
+        assert len(pids) == 2 and all(pid_alive(p) for p in pids)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+        assert "STOPPED" in out
+        assert not [p for p in pids if pid_alive(p)], "node processes survived SIGINT"
+    finally:
+        _kill_all(proc, pids)
+
+
+def _kill_all(proc: subprocess.Popen, pids: list[int]) -> None:
+    """Leave nothing running after a failed test (no-op when everything has exited)."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+    for pid in pids:
+        if pid_alive(pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def test_killed_supervisor_takes_its_nodes_down(domain_id, tmp_path):

@@ -299,6 +299,34 @@ def format_tables(results: dict[tuple[str, str], dict]) -> str:
     return "\n".join(lines)
 
 
+def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
+    """A paragraph on Table 8's allocation step from the bag of ``improved@dlc_60_mu05``
+    under ``out`` (``report.allocation_audit`` against rule-based allocation); empty when
+    that run is not among ``results``; says why when its bag cannot be audited."""
+    from .bag import BagError, read_run
+    from .report import allocation_audit
+
+    key = ("improved", "dlc_60_mu05")
+    if key not in results:
+        return ""
+    name = run_dir_name(*key)
+    try:
+        a = allocation_audit(read_run(out / name), other="rule")
+    except (BagError, ValueError) as exc:
+        return f"Allocation audit of {name}: not available ({exc})."
+    return (
+        f"Allocation audit of {name} (its bag; `python tools/allocation_audit.py`): on the "
+        f"same recorded demands and wheel loads, rule-based allocation would change no wheel "
+        f"torque by more than {a['max_difference_nm']:.1f} N·m (median "
+        f"{a['median_difference_nm']:.1f} N·m). Eq. (27) fixes each side's torque sum, so "
+        f"eq. (26)-(31) only splits it between front and rear: the rear wheel gets "
+        f"{100 * a['rear_share_min']:.1f}-{100 * a['rear_share_max']:.1f} % (rule: 50 %). "
+        f"|Mz| ≤ {a['max_abs_yaw_moment_nm']:.0f} N·m; the busiest tyre uses "
+        f"{100 * a['max_tyre_usage']:.0f} % of its friction (eq. 25). The recorded wheel "
+        f"torques are the allocator core's output on the recorded inputs to "
+        f"{a['replay_error_nm']:.1e} N·m.")
+
+
 def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
               compose: str = "none") -> int:
     """``fourws paper``: the eight runs, the tables beside the paper's, report.md."""
@@ -326,6 +354,9 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
               file=sys.stderr)
     wall = time.monotonic() - t_start
     tables = format_tables(results)
+    note = allocation_note(out, results)
+    if note:
+        tables += "\n" + note + "\n"
     print(tables)
     print(f"\n{len(runs)} runs in {wall:.0f} s of wall time")
     from .report_md import write_report
