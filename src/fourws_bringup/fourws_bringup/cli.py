@@ -1,7 +1,8 @@
 """The ``fourws`` command line.
 
     fourws run --scenario NAME_OR_YAML --controller NAME --out DIR [--force] [--mode M]
-    fourws paper [--out DIR] [--force]
+               [--no-plots] [--compose {none,control,all}]
+    fourws paper [--out DIR] [--force] [--only C@S ...] [--compose {none,control,all}]
     fourws report BAG_OR_RUN [--out DIR]
     fourws replay BAG [--rate R] [--topics T ...] [--domain-id N]
     fourws bag recover FILE.mcap [--out FIXED.mcap]
@@ -104,25 +105,28 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--controller", required=True, help="controller preset name or YAML path")
     r.add_argument("--out", required=True, help="output folder (bag/, metrics.json, plots/)")
     r.add_argument("--force", action="store_true", help="overwrite an existing output folder")
-    r.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    r.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep",
+                   help="lockstep: each step waits for every command (deterministic, as fast "
+                        "as the graph); realtime: the plant steps on a 10 ms wall timer")
     r.add_argument("--no-plots", action="store_true", help="skip the figures")
     r.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
     r.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("paper", help="run the paper's eight configurations and print Tables 6-8")
-    p.add_argument("--out", default="runs/paper")
-    p.add_argument("--force", action="store_true")
+    p.add_argument("--out", default="runs/paper",
+                   help="output folder: one run folder each, figures/, report.md")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output folder")
     p.add_argument("--only", nargs="*", help="subset of runs, as controller@scenario")
     p.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
     p.set_defaults(func=_cmd_paper)
 
     rep = sub.add_parser("report", help="metrics and figures from a recorded bag or run folder")
-    rep.add_argument("path")
+    rep.add_argument("path", help="run folder, bag folder or .mcap file")
     rep.add_argument("--out", help="folder for metrics.json and plots/ (default: beside bag)")
     rep.set_defaults(func=_cmd_report)
 
     rp = sub.add_parser("replay", help="publish a bag's topics again, with /clock")
-    rp.add_argument("bag")
+    rp.add_argument("bag", help="run folder, bag folder or .mcap file")
     rp.add_argument("--rate", type=float, default=1.0, help="1.0 real time; 0 as fast as possible")
     rp.add_argument("--topics", nargs="*", help="topics to replay (default: all recorded)")
     rp.add_argument("--domain-id", type=int, default=None,
@@ -132,8 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bag", help="bag utilities")
     bsub = b.add_subparsers(dest="bagcmd", required=True)
     rec = bsub.add_parser("recover", help="rewrite a truncated .mcap whole")
-    rec.add_argument("file")
-    rec.add_argument("--out")
+    rec.add_argument("file", help="the .mcap file to rewrite (e.g. cut short by kill -9)")
+    rec.add_argument("--out", help="where to write the recovered file "
+                                   "(default: FILE_recovered.mcap beside it)")
     rec.set_defaults(func=_cmd_bag)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
