@@ -126,10 +126,12 @@ def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, A
 
     For every stamp with a state, a drive command, an MPC command and wheel torques:
     ``replay_error_nm`` is the largest |recorded − recomputed| wheel torque with the recorded
-    method (0 when the allocator did what its core says); ``max``/``median_difference_nm``
-    compare it with method ``other`` (largest per-wheel |ΔT| per step); ``rear_share_min``/
-    ``_max`` bound the load-ratio share of eq. (26)-(31); ``max_tyre_usage`` is the largest
-    η of eq. (25) from the recorded tyre forces; ``max_abs_yaw_moment_nm`` the largest |M_z|.
+    method (that of the last step; 0 when the allocator did what its core says, > 0 where it
+    held its last output after rejecting an input or its method was changed mid-run);
+    ``max``/``median_difference_nm`` compare it with method ``other`` (largest per-wheel |ΔT|
+    per step); ``rear_share_min``/``_max`` bound the load-ratio share of eq. (26)-(31);
+    ``max_tyre_usage`` is the largest η of eq. (25) from the recorded tyre forces;
+    ``max_abs_yaw_moment_nm`` the largest |M_z|.
     ``cfg`` (geometry and limits; the method is the recorded one) defaults to the package's
     ``allocator.yaml``. Raises :class:`BagError` when the bag lacks a topic the audit needs.
     """
@@ -140,7 +142,8 @@ def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, A
     s, d, c, w = run.state, run.drive_command, run.mpc_command, run.wheel_torques
     for topic, cols, key in (("/vehicle/state", s, "fz"), ("/control/drive_command", d, "torque"),
                              ("/control/mpc_command", c, "yaw_moment"),
-                             ("/control/wheel_torques", w, "torque")):
+                             ("/control/wheel_torques", w, "torque"),
+                             ("/control/wheel_torques", w, "allocation")):
         if not len(cols.get("stamp_ns", ())) or key not in cols:
             raise BagError(f"{run.path}: no {topic} messages; the allocation audit needs them")
     stamps = w["stamp_ns"]
@@ -159,13 +162,14 @@ def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, A
     diff = np.abs(mine - theirs).max(axis=1)
     share = rear_load_ratio_share(fz, mu)
     eta = tyre_usage(np.asarray(s["fx"], float).reshape(-1, 4), s["fy"], s["fz"], s["mu"])
+    eta = eta[np.isfinite(eta)]
     return {
         "method": method, "other": other, "steps": int(ok.sum()),
         "replay_error_nm": float(np.abs(recorded - mine).max()),
         "max_difference_nm": float(diff.max()),
         "median_difference_nm": float(np.median(diff)),
         "rear_share_min": float(np.nanmin(share)), "rear_share_max": float(np.nanmax(share)),
-        "max_tyre_usage": float(np.nanmax(eta[np.isfinite(eta)])),
+        "max_tyre_usage": float(eta.max()) if eta.size else math.nan,
         "max_abs_yaw_moment_nm": float(np.abs(mz).max()),
     }
 
