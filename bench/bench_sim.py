@@ -5,7 +5,8 @@ Usage: python bench/bench_sim.py [OUT_JSON]   (default bench/results_sim.json)
 Drives the dlc_60_mu05 scenario's simulator with a scripted steer/torque sequence and times
 every ``Simulator.step`` (outputs included) with ``time.perf_counter``. Also reports, for the
 trade-off: the step without building the outputs, the step with a 2 ms substep, a μ-step road
-(per-substep μ lookup), and one four-wheel tyre evaluation in plain floats vs numpy.
+(per-substep μ lookup), and one four-wheel tyre evaluation in plain floats vs numpy. The four
+step variants take turns step by step, so their ratios hold when the host changes speed.
 Writes {median_ms, p99_ms, ...} as JSON and prints it.
 """
 
@@ -39,16 +40,20 @@ def _commands(k: int) -> tuple[float, float, np.ndarray]:
     return d, -0.3 * d, np.array([60.0, 80.0, 60.0, 80.0]) + 10.0 * math.sin(t)
 
 
-def _time_steps(sim: Simulator, method: str, n: int = N_STEPS) -> list[float]:
-    fn = getattr(sim, method)
+def _time_steps(*cases: tuple[Simulator, str], n: int = N_STEPS) -> list[list[float]]:
+    """Wall time (ms) of each step of every (simulator, method) case. The cases take turns
+    step by step, so a change in the host's speed during the bench hits them alike."""
+    fns = [getattr(sim, method) for sim, method in cases]
     for k in range(WARMUP):
-        fn(*_commands(k))
-    times = []
+        for fn in fns:
+            fn(*_commands(k))
+    times: list[list[float]] = [[] for _ in fns]
     for k in range(n):
         cmd = _commands(WARMUP + k)
-        t0 = time.perf_counter()
-        fn(*cmd)
-        times.append((time.perf_counter() - t0) * 1e3)
+        for fn, out in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            fn(*cmd)
+            out.append((time.perf_counter() - t0) * 1e3)
     return times
 
 
@@ -80,11 +85,12 @@ def _tyre_evals(n: int = 20000) -> tuple[float, float]:
 def main() -> None:
     out_path = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "bench" / "results_sim.json"
     scenario = load_scenario("dlc_60_mu05")
-    step = _time_steps(Simulator.from_scenario(scenario), "step")
-    advance = _time_steps(Simulator.from_scenario(scenario), "advance")
-    coarse = _time_steps(Simulator.from_scenario(scenario, substep_s=0.002), "step")
     mu_step = load_scenario("mu_step")
-    piecewise = _time_steps(Simulator.from_scenario(mu_step), "step")
+    step, advance, coarse, piecewise = _time_steps(
+        (Simulator.from_scenario(scenario), "step"),
+        (Simulator.from_scenario(scenario), "advance"),
+        (Simulator.from_scenario(scenario, substep_s=0.002), "step"),
+        (Simulator.from_scenario(mu_step), "step"))
     t_scalar, t_numpy = _tyre_evals()
     result = {
         "median_ms": round(statistics.median(step), 4),
