@@ -161,7 +161,7 @@ def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, A
     theirs = allocate_series(other, t, mz, fz, fy, mu, cfg)
     diff = np.abs(mine - theirs).max(axis=1)
     share = rear_load_ratio_share(fz, mu)
-    eta = tyre_usage(np.asarray(s["fx"], float).reshape(-1, 4), s["fy"], s["fz"], s["mu"])
+    eta = tyre_usage(s["fx"], s["fy"], s["fz"], s["mu"])
     eta = eta[np.isfinite(eta)]
     return {
         "method": method, "other": other, "steps": int(ok.sum()),
