@@ -15,7 +15,8 @@ received; its ``publish_time`` is its header stamp (or ``builtin_interfaces/Time
 field, as in ``/clock``) read straight from the CDR bytes, otherwise the receive time.
 
 :func:`read_run` decodes a run into per-topic numpy arrays, :func:`recover` rewrites the
-complete chunks of a truncated file as a whole file. Every problem with a file is a
+complete chunks of a truncated file as a whole file, :func:`recover_folder` does that in
+place in a bag folder and rewrites its metadata.yaml. Every problem with a file is a
 :class:`BagError` whose message names the file and what is wrong.
 
 No rclpy here: only mcap, mcap_ros2, numpy, yaml and (for schema text) ament_index_python.
@@ -62,6 +63,8 @@ QOS_KINDS: dict[str, dict[str, Any]] = {
                 "durability": "transient_local"},
     "clock": {"history": "keep_last", "depth": 1000, "reliability": "reliable",
               "durability": "volatile"},
+    "diagnostics": {"history": "keep_last", "depth": 10, "reliability": "reliable",
+                    "durability": "volatile"},
 }
 
 TOPICS: dict[str, tuple[str, str]] = {
@@ -75,6 +78,7 @@ TOPICS: dict[str, tuple[str, str]] = {
     "/control/drive_command": ("fourws_msgs/msg/DriveCommand", "control"),
     "/control/wheel_torques": ("fourws_msgs/msg/WheelTorques", "control"),
     "/run/status": ("std_msgs/msg/String", "latched"),
+    "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", "diagnostics"),
 }
 DEFAULT_TOPICS: tuple[str, ...] = tuple(TOPICS)
 
@@ -739,6 +743,9 @@ class RunData:
     reference: dict[str, np.ndarray] | None
     status: dict[str, Any] | None
     message_counts: dict[str, int]
+    #: Rejected inputs per node from /diagnostics: {node: {kind: count}}, the highest count
+    #: each node reported (its counters only grow within a run).
+    rejections: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
@@ -767,8 +774,9 @@ def read_run(path: str | Path) -> RunData:
         per: dict[str, list[tuple[int, Any]]] = {t: [] for t in STEP_TOPICS}
         reference = None
         status_text = None
-        wanted = [t for t in (*STEP_TOPICS, "/reference/trajectory", "/run/status")
-                  if t in bag.channels]
+        rejections: dict[str, dict[str, int]] = {}
+        wanted = [t for t in (*STEP_TOPICS, "/reference/trajectory", "/run/status",
+                              "/diagnostics") if t in bag.channels]
         for topic, log_ns, msg in bag.decoded(wanted):
             if topic in per:
                 stamp = _stamp_of(msg)
@@ -778,6 +786,8 @@ def read_run(path: str | Path) -> RunData:
                 reference = msg
             elif topic == "/run/status":
                 status_text = msg.data
+            elif topic == "/diagnostics":
+                _add_rejections(rejections, msg)
         path_out = bag.path
     ref_arrays = None
     if reference is not None:
@@ -792,7 +802,19 @@ def read_run(path: str | Path) -> RunData:
             status = {"raw": status_text}
     cols = {attr: _columns(per[t]) for t, attr in STEP_TOPICS.items()}
     return RunData(path=path_out, reference=ref_arrays, status=status,
-                   message_counts=counts, **cols)
+                   message_counts=counts, rejections=rejections, **cols)
+
+
+def _add_rejections(out: dict[str, dict[str, int]], msg: Any) -> None:
+    """Fold one DiagnosticArray's counters (KeyValue value = a count) into ``out``."""
+    for st in msg.status:
+        node = out.setdefault(str(st.name).lstrip("/"), {})
+        for kv in st.values:
+            try:
+                n = int(kv.value)
+            except ValueError:
+                continue
+            node[kv.key] = max(n, node.get(kv.key, 0))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -878,3 +900,85 @@ def recover(src: str | Path, dst: str | Path, *, compression: str = "zstd",
         w.finish()
     os.replace(tmp, dst_path)
     return count
+
+
+@dataclass(frozen=True)
+class FolderRecovery:
+    """What :func:`recover_folder` did: the bag's MCAP file (whole now), its rewritten
+    metadata.yaml, the messages in the file, and where the cut file went (None: it was
+    whole already and is untouched)."""
+
+    mcap: Path
+    metadata: Path
+    messages: int
+    kept_aside: Path | None
+
+
+def in_bag_folder(path: str | Path) -> bool:
+    """Whether ``path`` is a folder (a run or bag folder) or the ``.mcap`` of a bag folder
+    (a metadata.yaml beside it): :func:`recover_folder` repairs those in place."""
+    p = Path(path)
+    return p.is_dir() or (p.suffix == ".mcap" and (p.parent / "metadata.yaml").is_file())
+
+
+def _unused(path: Path) -> Path:
+    """``path``, or ``path.1``, ``path.2``... whichever does not exist yet."""
+    candidate, i = path, 0
+    while candidate.exists():
+        i += 1
+        candidate = path.with_name(f"{path.name}.{i}")
+    return candidate
+
+
+def recover_folder(path: str | Path, *, compression: str = "zstd") -> FolderRecovery:
+    """Repair a bag folder in place so every rosbag2 reader takes it whole.
+
+    ``path`` is a run folder, a bag folder or the ``.mcap`` inside one. A truncated file is
+    rewritten by :func:`recover` under its own name (so ``relative_file_paths`` stays
+    right) and the cut original is moved aside to ``NAME.mcap.truncated`` (not listed in
+    metadata.yaml, nothing lost). Then ``metadata.yaml`` is written from the file itself:
+    per-topic message counts, types, offered QoS and type hashes from its channels,
+    starting time and duration from its statistics; ``custom_data`` keeps what it held,
+    with ``fourws_state: recovered`` (``complete`` for a file that was whole already) and
+    ``fourws_recovered_from`` naming the cut file.
+    """
+    p = Path(path)
+    mcap = p if p.is_file() else resolve_mcap(p)
+    folder = mcap.parent
+    try:
+        check_mcap(mcap)
+        kept = None
+    except BagError:
+        kept = _unused(mcap.with_name(mcap.name + ".truncated"))
+        fixed = _unused(mcap.with_name(mcap.name + ".recovered"))
+        recover(mcap, fixed, compression=compression)
+        os.replace(mcap, kept)
+        os.replace(fixed, mcap)
+    meta_path = folder / "metadata.yaml"
+    custom: dict[str, str] = {}
+    with contextlib.suppress(OSError, yaml.YAMLError, AttributeError, TypeError):
+        old = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
+        custom = {str(k): str(v) for k, v in
+                  (old["rosbag2_bagfile_information"].get("custom_data") or {}).items()}
+    custom["fourws_state"] = "complete" if kept is None else "recovered"
+    if kept is not None:
+        custom["fourws_recovered_from"] = kept.name
+    with McapBag(mcap) as bag:
+        summary = bag.summary
+        stats = summary.statistics
+        counts = stats.channel_message_counts if stats else {}
+        topics = []
+        for cid, ch in sorted(summary.channels.items()):
+            schema = summary.schemas.get(ch.schema_id)
+            typ = schema.name if schema else ""
+            kind = TOPICS[ch.topic][1] if ch.topic in TOPICS else "control"
+            qos = parse_offered_qos(ch.metadata.get("offered_qos_profiles", "")) \
+                or dict(QOS_KINDS[kind])
+            topics.append(TopicRecord(TopicInfo(ch.topic, typ, qos), int(counts.get(cid, 0)),
+                                      ch.metadata.get("topic_type_hash", "")))
+        start = int(stats.message_start_time) if stats else 0
+        end = int(stats.message_end_time) if stats else 0
+    total = sum(t.message_count for t in topics)
+    write_metadata(folder, relative_file_paths=[mcap.name], topics=topics,
+                   starting_time_ns=start, duration_ns=end - start, custom_data=custom)
+    return FolderRecovery(mcap, meta_path, total, kept)

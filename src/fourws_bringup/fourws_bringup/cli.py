@@ -5,14 +5,13 @@
     fourws paper [--out DIR] [--force] [--only C@S ...] [--compose {none,control,all}]
     fourws report BAG_OR_RUN [--out DIR]
     fourws replay BAG [--rate R] [--topics T ...] [--domain-id N]
-    fourws bag recover FILE.mcap [--out FIXED.mcap]
+    fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
     fourws scenarios | fourws controllers
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from .runner import COMPOSE_LAYOUTS
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .paper import run_and_score
+    from .paper import metrics_json, run_and_score
     from .runner import RunError
 
     try:
@@ -32,8 +31,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except RunError as exc:
         print(f"fourws run: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(metrics, indent=2))
-    return 0 if metrics.get("completed") else 1
+    print(metrics_json(metrics), end="")
+    code = metrics.get("exit_code")  # fourws_common.exit_codes.ExitCode
+    return int(code) if isinstance(code, int) else 1
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:
@@ -50,14 +50,15 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from .bag import BagError
-    from .paper import report_path
+    from .paper import metrics_json, report_path
+    from .runner import RunError
 
     try:
         metrics = report_path(Path(args.path), Path(args.out) if args.out else None)
-    except (BagError, FileNotFoundError) as exc:
+    except (BagError, FileNotFoundError, RunError) as exc:
         print(f"fourws report: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(metrics, indent=2))
+    print(metrics_json(metrics), end="")
     return 0
 
 
@@ -68,14 +69,27 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_bag(args: argparse.Namespace) -> int:
-    from .bag import BagError, recover
+    from .bag import BagError, in_bag_folder, recover, recover_folder
 
     src = Path(args.file)
-    dst = Path(args.out) if args.out else src.with_name(src.stem + "_recovered.mcap")
     try:
+        if args.out is None and in_bag_folder(src):
+            r = recover_folder(src)
+            if r.kept_aside is None:
+                print(f"{r.mcap} is already whole ({r.messages} messages); "
+                      f"{r.metadata} rewritten from it")
+            else:
+                print(f"recovered {r.messages} messages into {r.mcap} (metadata.yaml updated); "
+                      f"the truncated file is kept as {r.kept_aside}")
+            return 0
+        dst = Path(args.out) if args.out else src.with_name(src.stem + "_recovered.mcap")
         n = recover(src, dst)
     except (BagError, FileNotFoundError) as exc:
         print(f"fourws bag recover: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"fourws bag recover: {exc.filename or src}: {exc.strerror or exc}",
+              file=sys.stderr)
         return 2
     print(f"recovered {n} messages from {src} into {dst}")
     return 0
@@ -136,9 +150,13 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bag", help="bag utilities")
     bsub = b.add_subparsers(dest="bagcmd", required=True)
     rec = bsub.add_parser("recover", help="rewrite a truncated .mcap whole")
-    rec.add_argument("file", help="the .mcap file to rewrite (e.g. cut short by kill -9)")
-    rec.add_argument("--out", help="where to write the recovered file "
-                                   "(default: FILE_recovered.mcap beside it)")
+    rec.add_argument("file", help="a run or bag folder, or an .mcap file, to rewrite (e.g. cut "
+                                  "short by kill -9); a bag folder is repaired in place: its "
+                                  ".mcap rewritten, metadata.yaml pointed at it, the cut file "
+                                  "kept as NAME.mcap.truncated")
+    rec.add_argument("--out", help="write the recovered file here instead and leave the bag "
+                                   "as it is (default for a bare .mcap: FILE_recovered.mcap "
+                                   "beside it)")
     rec.set_defaults(func=_cmd_bag)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(

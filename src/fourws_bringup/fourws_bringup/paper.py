@@ -7,11 +7,15 @@ Every number printed here is computed from a recorded bag by :func:`score_run`, 
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
-from .runner import RunOutcome, prepare_out_dir, run_graph
+from fourws_common.exit_codes import ExitCode
+
+from .runner import RunError, RunOutcome, prepare_out_dir, run_folder_problem, run_graph
 
 # Paper, Tables 6-8: (max |eY| m, RMSE eY m, MAE eY m, max |eφ| deg, RMSE eφ deg)
 PAPER_T6 = {
@@ -55,6 +59,49 @@ def run_dir_name(controller: str, scenario: str) -> str:
     return f"{controller}@{Path(scenario).stem}"
 
 
+def strict_metrics(metrics: Mapping) -> dict:
+    """``metrics`` as strict JSON (RFC 8259) can hold it: every float that is not finite
+    (NaN, ±inf: a metric of states that hold NaN, a wall time the bag does not have) becomes
+    null, and ``null_reasons`` maps its key path (``step_latency_ms.step.p50``, ``x[2]``) to
+    why (``"not finite (nan)"``), so no null in metrics.json is left unexplained."""
+    import numpy as np
+
+    reasons: dict[str, str] = dict(metrics.get("null_reasons") or {})
+
+    def clean(v, path: str):
+        if isinstance(v, Mapping):
+            return {k: clean(x, f"{path}.{k}" if path else str(k)) for k, x in v.items()
+                    if not (k == "null_reasons" and not path)}
+        if isinstance(v, list | tuple | np.ndarray):
+            return [clean(x, f"{path}[{i}]") for i, x in enumerate(v)]
+        if isinstance(v, np.generic):
+            v = v.item()
+        if isinstance(v, float) and not math.isfinite(v):
+            reasons[path] = f"not finite ({v})"
+            return None
+        return v
+
+    out = clean(metrics, "")
+    if reasons:
+        out["null_reasons"] = reasons
+    return out
+
+
+def metrics_json(metrics: Mapping) -> str:
+    """The text of metrics.json: :func:`strict_metrics`, indented, no NaN or Infinity."""
+    return json.dumps(strict_metrics(metrics), indent=2, allow_nan=False) + "\n"
+
+
+def write_metrics(folder: Path, metrics: Mapping) -> Path:
+    """Write ``folder/metrics.json`` (:func:`metrics_json`); a ``RunError`` if it cannot."""
+    path = folder / "metrics.json"
+    try:
+        path.write_text(metrics_json(metrics), encoding="utf-8")
+    except OSError as exc:
+        raise RunError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return path
+
+
 def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
               controller: str | None = None) -> dict:
     """metrics.json content for a run folder or bag, computed from the bag alone.
@@ -65,7 +112,10 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
 
     run = read_run(path)
     m = metrics_from_run(run)
-    status = run.status or {}
+    # The plant's final status: from its status file (outcome) when the live run has one,
+    # else as recorded in the bag.
+    status = (outcome.status if outcome is not None and outcome.status else None) \
+        or run.status or {}
     scenario = scenario or status.get("scenario") or "unknown"
     controller = controller or (run.controller or "unknown")
     out = {"scenario": Path(scenario).stem, "controller": controller}
@@ -82,14 +132,22 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     startup = status.get("startup_wait_s")
     out["startup_wait_s"] = float(startup) if isinstance(startup, int | float) else None
     out.update(m)
-    if outcome is not None:
+    for key in ("late_commands", "safe_hold_steps", "overruns", "rejected_commands"):
+        if isinstance(status.get(key), int):
+            out[key] = status[key]
+    if outcome is not None and (outcome.status or outcome.died or not run.status):
         out["completed"] = bool(outcome.completed)
         out["reason"] = outcome.reason
         if outcome.died:
             out["died"] = outcome.died
+            out["died_error"] = outcome.died_error
+        out["exit_code"] = int(outcome.code)
     else:
         out["completed"] = bool(status.get("completed", False))
         out["reason"] = str(status.get("reason", "no /run/status in the bag"))
+        code = status.get("exit_code")
+        out["exit_code"] = int(code) if isinstance(code, int) else (
+            0 if out["completed"] else None)
     return out
 
 
@@ -112,6 +170,11 @@ def metrics_from_run(run) -> dict:
     fb = diag.get("fallback")
     m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
     m["missing_steps"] = missing_steps(run)
+    # What each node rejected (inputs, stamps, caught errors), from /diagnostics; only the
+    # nodes that rejected something. Absent from bags recorded before /diagnostics existed.
+    m["input_rejections"] = {n: {k: v for k, v in c.items() if v}
+                             for n, c in sorted(getattr(run, "rejections", {}).items())
+                             if any(c.values())}
     lat = step_latencies_ms(run)
     if lat:
         m["step_latency_ms"] = lat
@@ -187,13 +250,14 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     """
     from fourws_sim.core.scenario import load_scenario
 
-    from .runner import RunError, controller_preset
+    from .runner import controller_preset
 
     controller_preset(controller)
     try:
         sc = load_scenario(scenario)
     except (ValueError, FileNotFoundError) as exc:
-        raise RunError(f"scenario '{scenario}': {exc}") from exc
+        why = str(exc).removeprefix(f"{Path(scenario)}: ")  # the file is named once
+        raise RunError(f"scenario '{scenario}': {why}") from exc
     prepare_out_dir(out_dir, force)
     print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
     outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
@@ -203,11 +267,12 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
         metrics = {"scenario": sc.name, "controller": controller, "completed": False,
                    "reason": f"{outcome.reason}; metrics failed: {exc}",
-                   "wall_time_s": outcome.wall_time_s}
+                   "wall_time_s": outcome.wall_time_s, "exit_code": int(ExitCode.ERROR)}
         if outcome.died:
             metrics["died"] = outcome.died
+            metrics["died_error"] = outcome.died_error
     metrics["compose"] = compose
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    write_metrics(out_dir, metrics)
     if plots and (out_dir / "bag").exists():
         try:
             from .bag import read_run
@@ -220,16 +285,20 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
 
 
 def report_path(path: Path, out: Path | None = None) -> dict:
-    """``fourws report``: metrics.json and figures recomputed from a bag or run folder."""
+    """``fourws report``: metrics.json and figures recomputed from a bag or run folder.
+
+    A ``RunError`` (before the bag is read) when ``out`` cannot be written.
+    """
     from .bag import read_run
     from .report import draw_figures
+    from .runner import writable_dir
 
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such bag or run folder")
     out = out or (path if (path / "bag").is_dir() else path.parent)
+    writable_dir(out)
     metrics = score_run(path)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    write_metrics(out, metrics)
     draw_figures(read_run(path), out / "plots")
     return metrics
 
@@ -329,12 +398,15 @@ def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
 
 def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
               compose: str = "none") -> int:
-    """``fourws paper``: the eight runs, the tables beside the paper's, report.md."""
-    from .runner import RunError
+    """``fourws paper``: the eight runs, the tables beside the paper's, report.md.
 
-    if out.exists() and any(out.iterdir()) and not force:
-        raise RunError(f"output folder {out} exists and is not empty; use --force")
-    out.mkdir(parents=True, exist_ok=True)
+    ``force`` lets an existing output of ``fourws paper`` (:func:`paper_folder_problem`) be
+    written over: each run's folder is replaced, report.md and figures/ rewritten, other run
+    folders kept. Any other non-empty folder is refused.
+    """
+    prepare_out_dir(out, force, problem=paper_folder_problem, replace=False,
+                    what="fourws paper output (" + ", ".join(PAPER_FOLDER_ENTRIES)
+                    + ", CONTROLLER@SCENARIO/ run folders)")
     runs = PAPER_RUNS
     if only:
         runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
@@ -367,6 +439,30 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
     for name, why in failed.items():
         print(f"fourws paper: {name} failed: {why}", file=sys.stderr)
     return 1 if failed else 0
+
+
+#: What ``fourws paper`` writes beside its run folders (``CONTROLLER@SCENARIO/``).
+PAPER_FOLDER_ENTRIES = ("report.md", "figures")
+
+
+def paper_folder_problem(folder: Path) -> str | None:
+    """Why ``folder`` is not the output of ``fourws paper``, or None if it is: it holds only
+    report.md, figures/ and run folders named ``CONTROLLER@SCENARIO``
+    (:func:`fourws_bringup.runner.run_folder_problem`), at least one of them."""
+    entries = sorted(folder.iterdir())
+    other = [p.name for p in entries if p.name not in PAPER_FOLDER_ENTRIES
+             and not (p.is_dir() and "@" in p.name)]
+    if other:
+        more = f" and {len(other) - 5} more" if len(other) > 5 else ""
+        return f"it holds {', '.join(repr(n) for n in other[:5])}{more}"
+    for p in entries:
+        if p.name in PAPER_FOLDER_ENTRIES or not any(p.iterdir()):
+            continue  # an empty run folder: one that was about to start
+        if (why := run_folder_problem(p)) is not None:
+            return f"{p.name}/ is not a run folder: {why}"
+    if not any(p.name == "report.md" or "@" in p.name for p in entries):
+        return "it has no report.md and no run folder"
+    return None
 
 
 def run_failure(m: dict) -> str | None:

@@ -5,18 +5,26 @@ as separate processes with the supervisor (their package YAML plus the controlle
 ``--params-file``), shows simulated time as it goes, waits for the plant to end the scenario,
 stops the graph cleanly and writes ``out_dir/metrics.json`` computed from the recorded bag
 alone (the same code as ``fourws report``) plus ``out_dir/plots/``. A node that dies stops
-the run; the bag is kept and metrics.json says which node died.
+the run; the bag is kept and metrics.json says which node died and its last error line.
+
+The outcome of a run comes from two records that do not depend on DDS timing: the plant's
+exit status (:class:`fourws_common.exit_codes.ExitCode`: completed, aborted, timeout) and the
+final status JSON it writes to ``logs/plant_status.json`` before it exits. The /run/status
+monitor only shows progress.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from fourws_common.exit_codes import RUN_END_CODES, ExitCode
 from fourws_common.resources import config_dir
 
 from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
@@ -56,37 +64,104 @@ def scenario_arg(name_or_path: str) -> str:
     return str(p.resolve()) if p.suffix in (".yaml", ".yml") else name_or_path
 
 
-def prepare_out_dir(out_dir: Path, force: bool) -> None:
-    """Refuse to overwrite an existing, non-empty output folder unless ``force``."""
-    if out_dir.exists() and any(out_dir.iterdir()):
+#: What ``fourws run`` writes into its output folder; ``--force`` deletes nothing else.
+RUN_FOLDER_ENTRIES = ("metrics.json", "bag", "logs", "plots")
+
+
+def run_folder_problem(folder: Path) -> str | None:
+    """Why ``folder`` is not a fourws run folder, or None if it is one: it holds only what
+    ``fourws run`` writes (:data:`RUN_FOLDER_ENTRIES`), among them ``metrics.json``,
+    ``bag/metadata.yaml`` or ``logs/`` (a run that died before its bag had any)."""
+    names = sorted(p.name for p in folder.iterdir())
+    other = [n for n in names if n not in RUN_FOLDER_ENTRIES]
+    if other:
+        more = f" and {len(other) - 5} more" if len(other) > 5 else ""
+        return f"it holds {', '.join(repr(n) for n in other[:5])}{more}"
+    if not ((folder / "metrics.json").is_file() or (folder / "bag" / "metadata.yaml").is_file()
+            or (folder / "logs").is_dir()):
+        return "it has no metrics.json, bag/metadata.yaml or logs/"
+    return None
+
+
+def writable_dir(out_dir: Path) -> None:
+    """Create ``out_dir`` (and its parents) if needed and check a file can be made in it;
+    a ``RunError`` in one line otherwise (an existing file, a read-only place)."""
+    import tempfile
+
+    if out_dir.exists() and not out_dir.is_dir():
+        raise RunError(f"output folder {out_dir} is an existing file, not a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out_dir):
+            pass
+    except OSError as exc:
+        raise RunError(f"cannot write output folder {out_dir}: {exc.strerror or exc}") from None
+
+
+def prepare_out_dir(out_dir: Path, force: bool, *,
+                    problem: Callable[[Path], str | None] = run_folder_problem,
+                    what: str = "fourws run folder (" + ", ".join(RUN_FOLDER_ENTRIES) + ")",
+                    replace: bool = True) -> None:
+    """Make ``out_dir`` a writable folder for a run's output.
+
+    An existing, non-empty folder is refused unless ``force``; with ``force`` it is emptied
+    (``replace``; else its content stays for the command to overwrite) only if ``problem``
+    (:func:`run_folder_problem` by default) finds it is fourws output (``what`` names the
+    kind in the message). Any other folder is refused whole, nothing in it deleted.
+    A file in the way, or a place that cannot be written, is a ``RunError`` too.
+    """
+    if out_dir.exists() and not out_dir.is_dir():
+        raise RunError(f"output folder {out_dir} is an existing file, not a folder")
+    try:
+        non_empty = out_dir.is_dir() and any(out_dir.iterdir())
+    except OSError as exc:
+        raise RunError(f"cannot read output folder {out_dir}: {exc.strerror or exc}") from None
+    if non_empty:
         if not force:
             raise RunError(f"output folder {out_dir} exists and is not empty; "
                            "use --force to overwrite it")
-        shutil.rmtree(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            why = problem(out_dir)
+        except OSError as exc:
+            why = f"cannot look inside it: {exc.strerror or exc}"
+        if why is not None:
+            raise RunError(f"output folder {out_dir} is not a {what}: {why}; --force replaces "
+                           "only fourws output or an empty folder, so nothing was deleted")
+        if replace:
+            try:
+                shutil.rmtree(out_dir)
+            except OSError as exc:
+                raise RunError(f"cannot replace output folder {out_dir}: "
+                               f"{exc.strerror or exc}") from None
+    writable_dir(out_dir)
 
 
 def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
-                extra_plant: dict | None = None, compose: str = "none") -> list[NodeSpec]:
+                extra_plant: dict | None = None, compose: str = "none",
+                status_file: Path | None = None, use_sim_time: bool = False
+                ) -> list[NodeSpec]:
     """The node list of a run: every node with its package YAML and the controller preset.
 
     ``compose`` (:data:`COMPOSE_LAYOUTS`) picks the processes: ``none``, one per node;
     ``control``, the MPC, speed PID and allocator in one container process; ``all``, the plant
     too. Same nodes, parameters and topics in every layout (:mod:`fourws_bringup.container`);
-    the recorder always has a process of its own.
+    the recorder always has a process of its own. ``status_file``: where the plant writes
+    its final status; ``use_sim_time``: every node's clock follows /clock.
     """
     if compose not in COMPOSE_LAYOUTS:
         raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
     preset = str(controller_preset(controller))
     subscribers = 3 + (1 if bag_dir is not None else 0)
     plant_params = {"scenario": scenario_arg(scenario), "mode": mode,
-                    "wait_for_subscribers": subscribers if mode == "lockstep" else 0}
+                    "wait_for_subscribers": subscribers}
+    if status_file is not None:
+        plant_params["status_file"] = str(status_file)
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
     specs = [
         NodeSpec("plant_node", "fourws_sim", "plant_node",
                  params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
-                 parameters=plant_params),
+                 parameters=plant_params, end_codes=RUN_END_CODES),
         NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
                  params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset]),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
@@ -95,6 +170,9 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                  params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
                                preset], parameters={"sync": sync}),
     ]
+    if use_sim_time:
+        for spec in specs:
+            spec.parameters["use_sim_time"] = True
     layout = COMPOSE_LAYOUTS[compose]
     if layout is not None:
         name, hosted = layout
@@ -107,19 +185,44 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
         specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
                               params_files=[str(config_dir("fourws_bringup") / "recorder.yaml")],
                               parameters={"output_dir": str(bag_dir),
-                                          "start_gate_topic": "/vehicle/state"},
+                                          "start_gate_topic": "/vehicle/state",
+                                          "use_sim_time": use_sim_time},
                               nice=RECORDER_NICE))
     return specs
 
 
 @dataclass
 class RunOutcome:
+    """How a run ended. ``status``: the plant's final status (its ``status_file``), or None
+    when the plant left none (it died); ``exit_code`` the plant's (or the container's)."""
+
     completed: bool
     reason: str
     wall_time_s: float
     sim_time_s: float
     steps: int
     died: str | None = None
+    exit_code: int | None = None
+    status: dict | None = None
+    died_error: str = ""
+
+    @property
+    def code(self) -> ExitCode:
+        """The exit code ``fourws run`` gives for this outcome."""
+        if self.died:
+            return ExitCode.ERROR
+        if self.exit_code in RUN_END_CODES:
+            return ExitCode(self.exit_code)
+        return ExitCode.COMPLETED if self.completed else ExitCode.ERROR
+
+
+def read_status_file(path: Path) -> dict | None:
+    """The plant's final status JSON, or None if it is missing or unreadable."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 class _Monitor:
@@ -176,32 +279,35 @@ class _Monitor:
 def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "lockstep",
               record: bool = True, progress: bool = True, timeout_s: float = 1800.0,
               extra_plant: dict | None = None, compose: str = "none",
-              stream=sys.stderr) -> RunOutcome:
+              use_sim_time: bool = False, stream=sys.stderr) -> RunOutcome:
     """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome."""
     bag_dir = out_dir / "bag" if record else None
-    specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose)
+    status_file = out_dir / "logs" / "plant_status.json"
+    with contextlib.suppress(FileNotFoundError):
+        status_file.unlink()
+    specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose,
+                        status_file=status_file, use_sim_time=use_sim_time)
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)  # its process
     lease = DomainLease()
     sup = Supervisor(specs, lease.domain_id, out_dir / "logs")
     monitor = None
-    died = None
     t0 = time.monotonic()
     try:
-        # Wall time and the real-time factor are the plant's own (/run/status): from its
-        # first state to its end, start-up excluded. t0 only bounds the run's duration.
+        # Wall time and the real-time factor are the plant's own (its status): from its
+        # first answered state to its end, start-up excluded. t0 only bounds the duration.
         monitor = _Monitor(lease.domain_id)
         sup.start(timeout_s=60.0)
         t0 = time.monotonic()
         last_print = 0.0
+        plant_proc = sup.procs[plant]
         while True:
             monitor.spin(0.05)
-            exited = sup.exited()
-            if plant in exited:
-                if exited[plant] != 0:
-                    raise NodeDied(sup.describe(plant), exited[plant],
-                                   sup.procs[plant].last_lines())
+            rc = plant_proc.popen.poll()
+            if rc is not None:
+                if rc not in plant_proc.spec.end_codes:
+                    raise NodeDied(sup.describe(plant), rc, plant_proc.last_lines())
                 break
-            sup.check()
+            sup.check()  # a death of another node; a normal end (exit 0) is not one
             now = time.monotonic()
             if now - t0 > timeout_s:
                 raise SupervisorError(f"run did not end within {timeout_s:.0f} s of wall time")
@@ -212,21 +318,11 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
                 stream.write(f"\r  {controller} on {scenario}: t_sim = {monitor.sim_time_s:6.2f} s"
                              f"  wall {wall:6.1f} s  RTF {rtf:4.1f}   ")
                 stream.flush()
-        plant_exit = time.monotonic()
-        for _ in range(20):  # the final status is latched; give it a moment to arrive
-            if monitor.status.get("state") == "ended":
-                break
-            monitor.spin(0.05)
-        st = monitor.status
-        wall = monitor.wall_time_s or max((monitor.ended_wall or plant_exit) - t0, 1e-3)
-        outcome = RunOutcome(bool(st.get("completed", False)),
-                             str(st.get("reason", "plant ended without a status")), wall,
-                             float(st.get("sim_time_s", monitor.sim_time_s)),
-                             int(st.get("steps", 0)))
+        outcome = _ended_outcome(rc, read_status_file(status_file), time.monotonic() - t0)
     except NodeDied as exc:
-        died = exc.name
         outcome = RunOutcome(False, str(exc).splitlines()[0], time.monotonic() - t0,
-                             monitor.sim_time_s if monitor else 0.0, 0, died)
+                             monitor.sim_time_s if monitor else 0.0, 0, exc.name,
+                             exit_code=exc.returncode, died_error=exc.last_error)
         stream.write(f"\n{exc}\n")
     except KeyboardInterrupt:
         outcome = RunOutcome(False, "interrupted by the user (Ctrl-C)", time.monotonic() - t0,
@@ -239,3 +335,19 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
     if progress:
         stream.write("\n")
     return outcome
+
+
+def _ended_outcome(exit_code: int, status: dict | None, runner_wall_s: float) -> RunOutcome:
+    """The outcome of a plant that ended normally: its status file, checked against its exit
+    code (the exit code alone when the file is missing)."""
+    from fourws_common.exit_codes import describe
+
+    if status is None or status.get("state") != "ended":
+        return RunOutcome(exit_code == ExitCode.COMPLETED,
+                          f"plant exited with {describe(exit_code)} without a final status",
+                          runner_wall_s, 0.0, 0, exit_code=exit_code)
+    wall = status.get("wall_time_s")
+    return RunOutcome(bool(status.get("completed", False)), str(status.get("reason", "")),
+                      float(wall) if isinstance(wall, int | float) else runner_wall_s,
+                      float(status.get("sim_time_s", 0.0)), int(status.get("steps", 0)),
+                      exit_code=exit_code, status=status)

@@ -8,8 +8,11 @@ remappings. All nodes of a graph share one ``ROS_DOMAIN_ID`` with discovery kept
 - :meth:`Supervisor.start` starts every node and waits until each is present in the ROS graph
   (graph introspection from a private context in the same domain; a timeout names the
   missing nodes).
-- :meth:`Supervisor.check` raises :class:`NodeDied` naming a node that exited, with its exit
-  code and last log lines.
+- :meth:`Supervisor.check` raises :class:`NodeDied` naming a node that exited with a code
+  outside its spec's ``end_codes`` (default: only 0), with the exit code, its last error line
+  and last log lines. A process that exits with one of its ``end_codes`` has *ended*, not
+  died (the plant at the end of a scenario: completed, aborted or timed out); it is no longer
+  waited for in the graph, and :meth:`Supervisor.ended` lists it.
 - :meth:`Supervisor.stop` sends SIGINT, then SIGTERM and SIGKILL after timeouts, to every
   process group. Children also get ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
 """
@@ -40,11 +43,28 @@ class NodeDied(SupervisorError):
     """A supervised node exited while the graph was running."""
 
     def __init__(self, name: str, returncode: int, last_lines: list[str]) -> None:
+        from fourws_common.exit_codes import describe
+
         self.name = name
         self.returncode = returncode
         self.last_lines = last_lines
+        self.last_error = last_error_line(last_lines)
         tail = "\n".join("    " + line for line in last_lines)
-        super().__init__(f"node '{name}' died with exit code {returncode}; last log lines:\n{tail}")
+        why = f": {self.last_error}" if self.last_error else ""
+        super().__init__(f"node '{name}' died with exit code {describe(returncode)}{why}; "
+                         f"last log lines:\n{tail}")
+
+
+_ERROR_MARKS = ("[fatal]", "FATAL", "[ERROR]", "Error:", "Exception:", "Traceback")
+
+
+def last_error_line(lines: list[str]) -> str:
+    """The last log line that reports an error (a ROS ERROR/FATAL line, ``[fatal]``, a Python
+    exception line), else ``""``."""
+    for line in reversed(lines):
+        if any(m in line for m in _ERROR_MARKS):
+            return line.strip()
+    return ""
 
 
 class GraphTimeout(SupervisorError):
@@ -74,6 +94,9 @@ class NodeSpec:
     # Graph names of the nodes a container process hosts (empty: one node named ``name``).
     # A container keeps its nodes' own names; ``parameters`` keys are then ``node:param``.
     hosts: tuple[str, ...] = ()
+    # Exit codes that end this process normally (not a death); the plant's include the
+    # run's outcomes (fourws_common.exit_codes.RUN_END_CODES).
+    end_codes: frozenset[int] = frozenset({0})
 
     def __post_init__(self) -> None:
         if not 0 <= self.nice <= 19:
@@ -104,7 +127,8 @@ class NodeSpec:
         params = {f"{s.name}:{k}": v for s in specs for k, v in s.parameters.items()}
         return cls(name, "fourws_bringup", "container", params_files=files, parameters=params,
                    log_level=specs[0].log_level, nice=min(s.nice for s in specs),
-                   hosts=tuple(s.name for s in specs))
+                   hosts=tuple(s.name for s in specs),
+                   end_codes=frozenset().union(*(s.end_codes for s in specs)))
 
     def command(self) -> list[str]:
         program = self.argv or [str(executable_path(self.package, self.executable))]
@@ -269,13 +293,18 @@ class Supervisor:
         return self._probe
 
     def wait_for_graph(self, names: list[str], timeout_s: float) -> None:
-        """Poll graph introspection until every name is present; raise naming the missing."""
+        """Poll graph introspection until every name is present; raise naming the missing.
+
+        A process that has already ended normally (a short run can start, finish and exit
+        before the probe sees it) is not waited for; one that died raises :class:`NodeDied`.
+        """
         probe = self._graph_probe()
         deadline = time.monotonic() + timeout_s
         missing = list(names)
         while True:
             self.check()
-            present = {n for n, _ns in probe.get_node_names_and_namespaces()}
+            gone = {n for p in self.ended() for n in self.procs[p].spec.graph_names}
+            present = {n for n, _ns in probe.get_node_names_and_namespaces()} | gone
             missing = [n for n in names if n not in present]
             if not missing:
                 return
@@ -284,11 +313,16 @@ class Supervisor:
             time.sleep(0.05)
 
     def check(self) -> None:
-        """Raise :class:`NodeDied` if any node has exited."""
+        """Raise :class:`NodeDied` if a process has exited with a code outside its
+        ``end_codes``; a normal end (:meth:`ended`) is not a death."""
         for name, proc in self.procs.items():
             rc = proc.popen.poll()
-            if rc is not None:
+            if rc is not None and rc not in proc.spec.end_codes:
                 raise NodeDied(self.describe(name), rc, proc.last_lines())
+
+    def ended(self) -> dict[str, int]:
+        """Processes that have ended normally (an exit code in their ``end_codes``)."""
+        return {n: rc for n, rc in self.exited().items() if rc in self.procs[n].spec.end_codes}
 
     def describe(self, name: str) -> str:
         """A process's name, with the nodes it hosts if it is a container."""

@@ -21,6 +21,8 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 
+from fourws_common.ros_params import check_overrides
+
 #: Environment variable that picks the executor: ``events`` (default) or ``single``.
 EXECUTOR_ENV = "FOURWS_EXECUTOR"
 EXECUTORS: dict[str, Callable[[], Executor]] = {
@@ -45,8 +47,9 @@ def make_executor(name: str | None = None) -> Executor:
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown, clean up. Returns an exit code.
 
-    A ``ValueError`` raised while building the node (a bad parameter) is reported in one line
-    and gives exit code 2, so a supervisor can show why the node did not start.
+    A ``ValueError`` raised while building the node (a bad, wrongly typed or unknown
+    parameter) is reported in one line and gives exit code 2 (``ExitCode.BAD_CONFIG``), so a
+    supervisor can show why the node did not start.
     """
     return run_nodes([factory], args)
 
@@ -66,6 +69,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         executor = make_executor()
         for factory in factories:
             nodes.append(factory())
+            check_overrides(nodes[-1])
             executor.add_node(nodes[-1])
         # A node that ends by itself (the plant at the end of a scenario) sets ``done``; a
         # steady-clock timer notices it, so the executor's loop runs in C++ without a return

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fourws_common.input_guard import REF_POSITION_MAX_M, REF_SPEED_MAX_MPS
+
 
 class PathIndex:
     """Nearest-sample lookup on a path; ``x``, ``y`` shape (N,), m."""
@@ -22,6 +24,9 @@ class PathIndex:
             raise ValueError("path needs x and y of equal length >= 2")
         if not (np.all(np.isfinite(self.x)) and np.all(np.isfinite(self.y))):
             raise ValueError("path holds non-finite coordinates")
+        big = max(float(np.max(np.abs(self.x))), float(np.max(np.abs(self.y))))
+        if big > REF_POSITION_MAX_M:
+            raise ValueError(f"path coordinates up to {big:.3g} m, beyond {REF_POSITION_MAX_M:g}")
         self.window = window
         self._last: int | None = None
 
@@ -51,6 +56,8 @@ class SpeedProfile:
         self.speed = np.asarray(speed, dtype=float)
         if self.speed.shape != self.index.x.shape or not np.all(np.isfinite(self.speed)):
             raise ValueError("speed profile missing, of the wrong length or non-finite")
+        if np.any(self.speed < 0.0) or np.any(self.speed > REF_SPEED_MAX_MPS):
+            raise ValueError(f"speed profile outside 0..{REF_SPEED_MAX_MPS:g} m/s")
         ds = np.hypot(np.diff(self.index.x), np.diff(self.index.y))
         dv_ds = np.diff(self.speed) / np.maximum(ds, 1e-9)
         self.accel = self.speed * np.append(dv_ds, dv_ds[-1])

@@ -29,3 +29,21 @@ CLOCK_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
+
+# Controllers' view of the vehicle state: only the newest matters. Keep-last 1 means a node
+# that fell behind (a stalled MPC in realtime) takes the newest state, not a backlog of old
+# ones; in lockstep one state is in flight at a time, so nothing is lost.
+LATEST_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+# /diagnostics: as diagnostic_updater publishes it (reliable, volatile), a queue of 10.
+DIAGNOSTICS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)

@@ -3,7 +3,12 @@
 Values come from the package YAML (``--params-file``); types, ranges and descriptions come
 from the dataclass field metadata (:func:`fourws_common.params.param`). Runtime changes go
 through :meth:`ParamBinding.on_set`, which validates the whole new config (field rules and
-cross-field rules) and swaps it in at once, or rejects the change with the reason.
+cross-field rules) and swaps it in at once, or rejects the change with the reason; a change
+that leaves the config equal (a value set to what it already is, a ``ros2 param load`` of the
+node's own dump) is accepted and changes nothing (``on_change`` is not called).
+
+A params-file value of the wrong type is an error naming the key (an integer is accepted for
+a float field: ``3`` means ``3.0``); :func:`check_overrides` makes an unknown key one too.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -68,8 +74,19 @@ class ParamBinding(Generic[T]):
         self._on_change = on_change
         self._fields = [f for f in dataclasses.fields(cls) if f.name not in skip]
         values: dict[str, Any] = {}
+        overrides = getattr(node, "_parameter_overrides", {})
         for f in self._fields:
-            node.declare_parameter(f.name, _ros_default(f.default), _descriptor(f))
+            given = overrides.get(f.name)
+            if (given is not None and isinstance(f.default, float)
+                    and given.type_ == Parameter.Type.INTEGER):
+                overrides[f.name] = Parameter(f.name, Parameter.Type.DOUBLE, float(given.value))
+            try:
+                node.declare_parameter(f.name, _ros_default(f.default), _descriptor(f))
+            except InvalidParameterTypeException:
+                raise ValueError(
+                    f"parameter '{f.name}' of {node.get_name()}: got {given.value!r} "
+                    f"({given.type_.name}), expected {type(_ros_default(f.default)).__name__}"
+                ) from None
             values[f.name] = node.get_parameter(f.name).value
         self.config: T = self._build(values)
         node.add_on_set_parameters_callback(self._on_set)
@@ -88,7 +105,25 @@ class ParamBinding(Generic[T]):
         except (ValueError, TypeError) as exc:
             self._node.get_logger().warning(f"rejected parameter change: {exc}")
             return SetParametersResult(successful=False, reason=str(exc))
+        if new == self.config:
+            return SetParametersResult(successful=True)  # nothing changes
         self.config = new
         if self._on_change is not None:
             self._on_change(new)
         return SetParametersResult(successful=True)
+
+
+#: Parameters every rclpy node may be given without declaring them.
+BUILTIN_PREFIXES = ("qos_overrides.", "use_sim_time", "start_type_description_service")
+
+
+def check_overrides(node: Node) -> None:
+    """Raise ``ValueError`` naming every parameter given to ``node`` (params file, ``-p``)
+    that it does not declare: a typo such as ``np_baselin`` must not run with the default."""
+    given = getattr(node, "_parameter_overrides", {})
+    unknown = sorted(k for k in given if not node.has_parameter(k)
+                     and not k.startswith(BUILTIN_PREFIXES))
+    if unknown:
+        known = sorted(node._parameters)  # noqa: SLF001 - the declared names
+        raise ValueError(f"{node.get_name()}: unknown parameter(s) {unknown} (not declared "
+                         f"by the node; check the spelling). Known: {', '.join(known)}")

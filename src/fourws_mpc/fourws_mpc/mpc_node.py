@@ -1,12 +1,26 @@
 """MPC node: the online parameter-reconfigured MPC on the ROS graph.
 
-Subscribes ``/vehicle/state`` and ``/reference/trajectory``; publishes
-``/control/mpc_command`` and ``/control/mpc_diagnostics`` for every new state, stamped like
-it. All control logic lives in ``fourws_mpc.core.controller``; this node converts messages,
-measures the wall time of each controller step for the diagnostics, and handles bad input:
-a state with NaN/inf is rejected and logged (nothing is published for it); a state stamp
-already answered (the plant republishes while it waits) is answered again from cache, so the
-controller's internal history (APCHA, warm start) advances exactly once per step.
+Subscribes ``/vehicle/state`` (newest only, :data:`~fourws_common.qos.LATEST_QOS`) and
+``/reference/trajectory``; publishes ``/control/mpc_command`` and ``/control/mpc_diagnostics``
+for every new state, stamped like it. All control logic lives in
+``fourws_mpc.core.controller``; this node converts messages, measures the wall time of each
+controller step for the diagnostics, and guards its input:
+
+- a state that is not finite or not physically plausible
+  (:func:`fourws_common.input_guard.implausible_fields`) is rejected; nothing reaches the core;
+- stamps go through a :class:`~fourws_common.input_guard.StampGate`: an already answered
+  stamp (the plant republishes while it waits) is answered again from cache, so the
+  controller's history (APCHA, warm start) advances exactly once per step; a stamp in the
+  past or far in the future is rejected without becoming the new "last";
+- a new run — a new reference trajectory (every plant start publishes one) or a confirmed
+  restart of the stamps — resets the controller, logged once;
+- an exception inside a step is caught and logged with the state that caused it; the node
+  answers with its last valid command (``fallback``, solver status ``exception``), so a
+  lockstep plant never stalls on it;
+- a parameter change is applied to the running controller (``MpcController.update_config``):
+  plan, horizons and APCHA history are kept; setting a value it already has changes nothing.
+
+Every rejection is counted and logged at a limited rate, and published on ``/diagnostics``.
 """
 
 from __future__ import annotations
@@ -16,15 +30,23 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from fourws_common.conversions import RateLimitedLog, non_finite_fields, stamp_to_ns
+from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.health import NodeHealth
+from fourws_common.input_guard import (
+    MAX_STAMP_JUMP_NS,
+    Stamp,
+    StampGate,
+    implausible_fields,
+)
 from fourws_common.node_main import run_node
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
 from fourws_mpc.core.controller import MpcConfig, MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
 STATE_FIELDS = ("x", "y", "yaw", "vx", "vy", "yaw_rate")
+CHECKED_FIELDS = (*STATE_FIELDS, "mu")
 
 
 class MpcNode(Node):
@@ -33,11 +55,11 @@ class MpcNode(Node):
         self.params = ParamBinding(self, MpcConfig, on_change=self._on_params)
         self.ctrl = MpcController(self.params.config)
         self.ref: Reference | None = None
-        self.last_stamp_ns: int | None = None
+        self.ref_msg: ReferenceTrajectory | None = None
+        self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
-        self.reject_log = RateLimitedLog(self.get_logger().warning)
-        self.wait_log = RateLimitedLog(self.get_logger().warning, period_s=5.0)
-        self.fallback_log = RateLimitedLog(self.get_logger().warning)
+        self.health = NodeHealth(self)
+        self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
         self.pub_cmd = self.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
@@ -46,40 +68,80 @@ class MpcNode(Node):
                                               CONTROL_QOS)
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, CONTROL_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 
     def _on_params(self, cfg: MpcConfig) -> None:
-        self.ctrl = MpcController(cfg)
-        self.get_logger().info(f"parameters changed: controller '{cfg.controller}' rebuilt")
+        self.ctrl.update_config(cfg)
+        if self.ref_msg is not None:
+            self.ref = self._reference(self.ref_msg)  # the search window may have changed
+        self.get_logger().info(f"parameters applied to the running controller "
+                               f"'{cfg.controller}' (state kept)")
+
+    def _reference(self, msg: ReferenceTrajectory) -> Reference:
+        cfg = self.params.config
+        return Reference.from_arrays(msg.x, msg.y, msg.yaw, msg.curvature, msg.speed,
+                                     search_back=cfg.ref_search_back,
+                                     search_ahead=cfg.ref_search_ahead)
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
-            self.ref = Reference.from_arrays(
-                np.asarray(msg.x), np.asarray(msg.y), np.asarray(msg.yaw),
-                np.asarray(msg.curvature), np.asarray(msg.speed))
-        except ValueError as exc:
-            self.get_logger().error(f"rejected reference trajectory: {exc}")
+            ref = self._reference(msg)
+        except (ValueError, FloatingPointError) as exc:
+            self.health.reject("reference", 0, f"rejected reference trajectory: {exc}")
             return
-        self.get_logger().info(f"reference with {len(msg.x)} points")
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            self.health.error("reference_error", 0, exc, f"a reference of {len(msg.x)} points")
+            return
+        new_run = self.ref is not None
+        self.ref, self.ref_msg = ref, msg
+        self._reset()
+        self.get_logger().info(f"reference with {len(msg.x)} points"
+                               + ("; new run: controller reset" if new_run else ""))
+
+    def _reset(self) -> None:
+        self.ctrl.reset()
+        self.gate.reset()
+        self.cached = None
 
     def _on_state(self, msg: VehicleState) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
-        if stamp_ns == self.last_stamp_ns and self.cached is not None:
-            self.pub_cmd.publish(self.cached[0])
-            self.pub_diag.publish(self.cached[1])
-            return
-        bad = non_finite_fields(msg, STATE_FIELDS)
+        bad = implausible_fields(msg, CHECKED_FIELDS)
         if bad:
-            self.reject_log(stamp_ns, f"rejected vehicle state at {stamp_ns} ns with "
-                            f"non-finite {bad}")
+            self.health.reject("implausible_state", stamp_ns, f"rejected vehicle state at "
+                               f"{stamp_ns} ns: {', '.join(bad)}")
             return
         if self.ref is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
+        verdict = self.gate.check(stamp_ns)
+        if verdict is Stamp.REPEAT:
+            if self.cached is not None:
+                self.pub_cmd.publish(self.cached[0])
+                self.pub_diag.publish(self.cached[1])
+            return
+        if verdict in (Stamp.PAST, Stamp.FUTURE):
+            self.health.reject(f"{verdict.value}_stamp", stamp_ns,
+                               f"rejected state stamped {stamp_ns} ns: in the "
+                               f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
+            return
+        if verdict is Stamp.JUMPED:
+            self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, "
+                                      "controller reset")
+            last = self.gate.last_ns
+            self._reset()
+            self.gate.check(last)
+        try:
+            self._step(msg, stamp_ns)
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            self.health.error("step_error", stamp_ns, exc, f"the state at {stamp_ns} ns "
+                              f"({', '.join(f'{k}={getattr(msg, k):.6g}' for k in STATE_FIELDS)})")
+            self._answer_held(msg)
+
+    def _step(self, msg: VehicleState, stamp_ns: int) -> None:
         meas = VehicleSample(**{k: float(getattr(msg, k)) for k in STATE_FIELDS})
         t0 = time.perf_counter()
-        mu = float(np.mean(msg.mu))
+        mu = float(np.mean(msg.mu)) if len(msg.mu) else float("nan")
         res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref,
                              mu=mu if np.isfinite(mu) and mu > 0.0 else None)
         solve_ms = (time.perf_counter() - t0) * 1e3
@@ -96,9 +158,23 @@ class MpcNode(Node):
         diag.iterations, diag.slack = int(res.iterations), res.slack
         diag.fallback = bool(res.fallback)
         if res.fallback:
-            self.fallback_log(stamp_ns, f"solver '{res.solver_status}' at {stamp_ns} ns: "
-                              "used the previous plan")
-        self.last_stamp_ns, self.cached = stamp_ns, (cmd, diag)
+            self.health.reject("solver_fallback", stamp_ns, f"solver '{res.solver_status}' at "
+                               f"{stamp_ns} ns: used the previous plan")
+        self.cached = (cmd, diag)
+        self.pub_cmd.publish(cmd)
+        self.pub_diag.publish(diag)
+
+    def _answer_held(self, msg: VehicleState) -> None:
+        """After a failed step: the last valid command (zeros before the first), restamped."""
+        u = self.ctrl.u_prev
+        cmd, diag = self._cmd_msg, self._diag_msg
+        cmd.header = diag.header = msg.header
+        cmd.delta_front, cmd.delta_rear, cmd.yaw_moment = (float(u[0]), float(u[1]),
+                                                           float(u[2]))
+        diag.controller = self.params.config.controller
+        diag.solver_status, diag.fallback = "exception", True
+        diag.solve_time_ms, diag.iterations, diag.slack = 0.0, 0, 0.0
+        self.cached = (cmd, diag)
         self.pub_cmd.publish(cmd)
         self.pub_diag.publish(diag)
 

@@ -13,7 +13,22 @@ Timing modes:
   message never stalls the run; controllers answer a repeated stamp with their cached
   output). No command for ``command_timeout_s`` ends the run with a reason naming the
   missing input.
-- ``realtime``: step on a 10 ms wall timer, holding the latest valid commands.
+- ``realtime``: step on a 10 ms steady-clock timer, holding the latest valid commands.
+  A command older than ``command_max_age_s`` (its stamp is the state it answered) is
+  counted and warned about (``late_commands``); older than ``command_hold_timeout_s`` the
+  plant falls back to a safe hold — steer held at the last valid angles, every wheel torque
+  0 (coast) — until fresh commands arrive (``safe_hold_steps``). A tick later than 1.5
+  periods counts as an ``overrun``.
+
+Both modes hold the first state until ``/vehicle/state`` has ``wait_for_subscribers``
+subscribers (the recorder among them: a bag starts with step 0). Every timer runs on the
+steady clock, so ``use_sim_time:=true`` works on the plant too (it is the /clock source).
+
+End of a run: the final ``/run/status``, then the process lingers until every reliable
+subscriber has acknowledged the final state and status (at most ``linger_timeout_s``), writes
+the same status as JSON to ``status_file`` (if set: the reliable record a supervisor reads
+after the exit), and exits with :class:`fourws_common.exit_codes.ExitCode` COMPLETED (0),
+ABORTED (3: left the road or spun) or TIMEOUT (4: commands did not arrive).
 
 Bad input: a NaN/inf command is rejected and the last valid one held (counted, logged at most
 once per second); angles beyond the actuator limits are clipped by the actuator model with a
@@ -27,12 +42,16 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
@@ -43,6 +62,7 @@ from fourws_common.conversions import (
     ns_to_stamp,
     stamp_to_ns,
 )
+from fourws_common.exit_codes import ExitCode
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
@@ -67,9 +87,19 @@ class PlantNodeConfig:
                                      unit="s")
     republish_period_s: float = param(0.25, "lockstep: publish the waiting state again after "
                                       "this wall time", lo=0.01, hi=10.0, unit="s")
-    wait_for_subscribers: int = param(0, "lockstep: hold the first state until /vehicle/state "
-                                      "has this many subscribers (0: start at once)",
-                                      lo=0, hi=100)
+    wait_for_subscribers: int = param(0, "hold the first state until /vehicle/state has this "
+                                      "many subscribers (0: start at once)", lo=0, hi=100)
+    command_max_age_s: float = param(0.05, "realtime: warn about and count a command older "
+                                     "than this (its stamp is the state it answered)",
+                                     lo=0.0, hi=60.0, unit="s")
+    command_hold_timeout_s: float = param(0.5, "realtime: safe hold (steer held, torques 0) "
+                                          "while the newest command is older than this",
+                                          lo=0.01, hi=600.0, unit="s")
+    status_file: str = param("", "write the final /run/status JSON here before exiting "
+                             "(empty: none)")
+    linger_timeout_s: float = param(5.0, "at the end, wait at most this long for reliable "
+                                    "subscribers to acknowledge the final state and status",
+                                    lo=0.0, hi=60.0, unit="s")
     status_period_s: float = param(0.5, "publish a 'running' /run/status (steps, simulated "
                                    "and wall time) this often", lo=0.05, hi=60.0, unit="s")
     path_pose_spacing_m: float = param(0.5, "spacing of poses in /reference/path",
@@ -102,12 +132,22 @@ class PlantNode(Node):
         self.torque_cmd = np.zeros(4)
         self.pending_cmd: MpcCommand | None = None
         self.pending_torque: WheelTorques | None = None
+        # realtime: stamps (ns) of the held commands, and the honesty counters
+        self.cmd_stamp_ns: int | None = None
+        self.torque_stamp_ns: int | None = None
+        self.late_commands = 0
+        self.safe_hold_steps = 0
+        self.overruns = 0
+        self.in_safe_hold = False
+        self.last_tick: float | None = None
+        self._steady = RclClock(clock_type=ClockType.STEADY_TIME)
         self.last_progress = time.monotonic()
         self.last_publish = time.monotonic()
         log = self.get_logger()
         self.reject_log = RateLimitedLog(log.warning)
         self.stamp_log = RateLimitedLog(log.warning)
         self.clip_log = RateLimitedLog(log.warning)
+        self.late_log = RateLimitedLog(log.warning)
 
         self.pub_state = self.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
         self.pub_odom = self.create_publisher(Odometry, "/vehicle/odom", CONTROL_QOS)
@@ -138,15 +178,13 @@ class PlantNode(Node):
         self._publish_reference()
         self._publish_status("running", "")
         self.outputs = self.sim.outputs()
-        self.started = cfg.mode == "realtime" or cfg.wait_for_subscribers == 0
-        if self.started:
-            self.start_wall = time.monotonic()
-            self._publish_state()
-        if cfg.mode == "realtime":
-            self.create_timer(cfg.dt_s, self._realtime_tick)
-        else:
-            self.create_timer(min(cfg.republish_period_s, 0.1), self._lockstep_watchdog)
-        self.create_timer(cfg.status_period_s, self._status_heartbeat)
+        self.started = False
+        # Steady-clock timers: the plant is the /clock source, so a timer on ROS time would
+        # wait for itself under use_sim_time.
+        self.create_timer(min(cfg.republish_period_s, 0.1), self._watchdog, clock=self._steady)
+        self.create_timer(cfg.status_period_s, self._status_heartbeat, clock=self._steady)
+        if cfg.wait_for_subscribers == 0:
+            self._start()
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
@@ -178,8 +216,12 @@ class PlantNode(Node):
         if self.ended:
             return
         if self.params.config.mode == "realtime":
+            stamp = stamp_to_ns(msg.header.stamp)
+            if self.cmd_stamp_ns is not None and stamp < self.cmd_stamp_ns:
+                return  # older than the command held: out of order
             if self._valid_cmd(msg):
                 self.steer_cmd = (msg.delta_front, msg.delta_rear)
+                self.cmd_stamp_ns = stamp
             return
         if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
             self.stamp_log(self._now_ns(), f"ignored mpc_command stamped "
@@ -192,8 +234,12 @@ class PlantNode(Node):
         if self.ended:
             return
         if self.params.config.mode == "realtime":
+            stamp = stamp_to_ns(msg.header.stamp)
+            if self.torque_stamp_ns is not None and stamp < self.torque_stamp_ns:
+                return
             if (t := self._valid_torques(msg)) is not None:
                 self.torque_cmd = t
+                self.torque_stamp_ns = stamp
             return
         if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
             self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped "
@@ -214,11 +260,12 @@ class PlantNode(Node):
         self.pending_torque = None
         self._advance()
 
-    def _advance(self) -> None:
+    def _advance(self, torque: np.ndarray | None = None) -> None:
         cfg = self.params.config
         if self.answered_wall is None:
             self.answered_wall = self.last_publish
-        self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1], self.torque_cmd,
+        self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1],
+                                     self.torque_cmd if torque is None else torque,
                                      dt_s=cfg.dt_s)
         self._warn_clipping()
         self.step_k += 1
@@ -243,45 +290,107 @@ class PlantNode(Node):
         if self.start_wall is not None and not self.ended:
             self._publish_status("running", "")
 
-    def _realtime_tick(self) -> None:
-        if not self.ended:
-            self._advance()
+    def _start(self) -> None:
+        cfg = self.params.config
+        self.started = True
+        self.start_wall = time.monotonic()
+        self.last_progress = self.start_wall
+        if cfg.wait_for_subscribers:
+            self.get_logger().info("all subscribers present: starting")
+        self._publish_state()
+        if cfg.mode == "realtime":
+            self.create_timer(cfg.dt_s, self._realtime_tick, clock=self._steady)
 
-    def _lockstep_watchdog(self) -> None:
+    def _realtime_tick(self) -> None:
+        if self.ended:
+            return
+        cfg = self.params.config
+        now = time.monotonic()
+        if self.last_tick is not None and now - self.last_tick > 1.5 * cfg.dt_s:
+            self.overruns += 1
+        self.last_tick = now
+        t_ns = self.step_k * self.dt_ns
+        held = [self.cmd_stamp_ns, self.torque_stamp_ns]
+        age_s = ((t_ns - min(held)) * 1e-9 if None not in held
+                 else (now - (self.start_wall or now)))
+        torque = None
+        if age_s > cfg.command_max_age_s:
+            self.late_commands += 1
+            self.late_log(t_ns, f"commands {age_s * 1e3:.0f} ms old at step {self.step_k} "
+                          f"(limit {cfg.command_max_age_s * 1e3:.0f} ms)")
+        if age_s > cfg.command_hold_timeout_s:
+            if not self.in_safe_hold:
+                self.get_logger().warning(
+                    f"safe hold at step {self.step_k}: newest commands {age_s:.2f} s old; "
+                    "steer held, wheel torques 0 until fresh commands arrive")
+            self.in_safe_hold = True
+            self.safe_hold_steps += 1
+            torque = np.zeros(4)
+        elif self.in_safe_hold:
+            self.in_safe_hold = False
+            self.get_logger().info(f"fresh commands at step {self.step_k}: safe hold ended")
+        self._advance(torque)
+
+    def _watchdog(self) -> None:
         if self.ended:
             return
         cfg = self.params.config
         now = time.monotonic()
         if not self.started:
-            if self.pub_state.get_subscription_count() < cfg.wait_for_subscribers:
-                self.last_progress = now
-                return
-            self.started = True
-            self.start_wall = time.monotonic()
-            self.get_logger().info("all subscribers present: starting")
-            self._publish_state()
+            if self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers:
+                self._start()
+            return
+        if cfg.mode == "realtime":
             return
         if now - self.last_progress > cfg.command_timeout_s:
             missing = [name for name, held in (("/control/mpc_command", self.pending_cmd),
                                                ("/control/wheel_torques", self.pending_torque))
                        if held is None]
             self._finish(False, f"no {' and '.join(missing)} for step {self.step_k} within "
-                         f"{cfg.command_timeout_s:.1f} s")
+                         f"{cfg.command_timeout_s:.1f} s", ExitCode.TIMEOUT)
             return
         if now - self.last_publish > cfg.republish_period_s:
             self._publish_state()
 
-    def _finish(self, completed: bool, reason: str) -> None:
+    def _finish(self, completed: bool, reason: str, code: ExitCode | None = None) -> None:
         self.get_logger().info(
             f"run ended at t = {self.outputs.t_s:.2f} s after {self.step_k} steps: {reason}")
-        self._publish_status("ended", reason, completed)
+        if code is None:
+            code = ExitCode.COMPLETED if completed else ExitCode.ABORTED
+        self.exit_code = int(code)
+        self.final_status = self._publish_status("ended", reason, completed)
         self.ended = True
-        # Linger briefly so reliable subscribers (recorder, runner) receive the final
-        # state and status before the process exits.
-        self._exit_timer = self.create_timer(0.5, self._exit)
+        # Linger until every reliable subscriber (recorder, runner) has acknowledged the
+        # final state and status, so none of them depends on the timing of the exit.
+        self._linger_deadline = time.monotonic() + self.params.config.linger_timeout_s
+        self._exit_timer = self.create_timer(0.02, self._linger, clock=self._steady)
 
-    def _exit(self) -> None:
+    def _linger(self) -> None:
+        zero = Duration(seconds=0)
+        acked = all(p.wait_for_all_acked(zero) for p in (self.pub_state, self.pub_status))
+        if not acked and time.monotonic() < self._linger_deadline:
+            return
+        self._exit_timer.cancel()
+        waited = self.params.config.linger_timeout_s - (self._linger_deadline - time.monotonic())
+        if acked:
+            self.get_logger().info(f"final state and status acknowledged after {waited:.2f} s")
+        else:
+            self.get_logger().warning(f"final state or status not acknowledged by every "
+                                      f"subscriber within {waited:.2f} s; exiting")
+        self._write_status_file()
         self.done = True
+
+    def _write_status_file(self) -> None:
+        path = self.params.config.status_file
+        if not path:
+            return
+        tmp = f"{path}.tmp{os.getpid()}"
+        try:
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(self.final_status, fh)
+            os.replace(tmp, path)
+        except OSError as exc:
+            self.get_logger().error(f"could not write status_file {path}: {exc}")
 
     # -- outputs -------------------------------------------------------------------------
     def _now_ns(self) -> int:
@@ -329,7 +438,7 @@ class PlantNode(Node):
             path.poses.append(pose)
         self.pub_path.publish(path)
 
-    def _publish_status(self, state: str, reason: str, completed: bool = False) -> None:
+    def _publish_status(self, state: str, reason: str, completed: bool = False) -> dict:
         """/run/status JSON. ``wall_time_s``: from the publication of the first state that
         was answered to now (the plant's own monotonic clock), so the real-time factor is in
         the bag and excludes start-up; ``startup_wait_s``: from the first state to that one
@@ -339,12 +448,18 @@ class PlantNode(Node):
         wall = None if origin is None else now - origin
         startup = (None if self.start_wall is None or self.answered_wall is None
                    else self.answered_wall - self.start_wall)
-        self.pub_status.publish(String(data=json.dumps({
+        status = {
             "state": state, "completed": completed, "reason": reason, "steps": self.step_k,
             "sim_time_s": self.step_k * self.dt_ns * 1e-9, "scenario": self.scenario.name,
+            "mode": self.params.config.mode,
             "rejected_commands": self.reject_log.count, "wall_time_s": wall,
-            "startup_wait_s": startup,
-        })))
+            "startup_wait_s": startup, "late_commands": self.late_commands,
+            "safe_hold_steps": self.safe_hold_steps, "overruns": self.overruns,
+        }
+        if state == "ended":
+            status["exit_code"] = self.exit_code
+        self.pub_status.publish(String(data=json.dumps(status)))
+        return status
 
 
 def main(args: list[str] | None = None) -> int:

@@ -8,8 +8,12 @@ T) and ``/control/mpc_command`` (yaw moment Mz); publishes ``/control/wheel_torq
 - ``sync: latest``: publishes on every drive command with the latest state and yaw moment.
 
 Bad input (NaN/inf, absurd demand, a wheel in the air the core cannot serve) never gives a
-non-finite torque: the core raises, the input is rejected and logged, and the last valid
-torques are published again with the new stamp so the plant never stalls.
+non-finite torque: the core raises (or the state fails
+:func:`fourws_common.input_guard.implausible_fields`), the input is rejected and logged, and
+the last valid torques are published again with the new stamp so the plant never stalls. An
+input stamped in the past or far in the future is dropped with a count (``/diagnostics``),
+never adopted as the new "last". A new reference trajectory (a new run) or a confirmed
+restart of the state stamps clears every held input and the last valid torques.
 """
 
 from __future__ import annotations
@@ -19,12 +23,20 @@ from dataclasses import dataclass, fields
 import numpy as np
 from rclpy.node import Node
 
-from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.conversions import stamp_to_ns
+from fourws_common.health import NodeHealth
+from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate, implausible_fields
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CONTROL_QOS
+from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
-from fourws_msgs.msg import DriveCommand, MpcCommand, VehicleState, WheelTorques
+from fourws_msgs.msg import (
+    DriveCommand,
+    MpcCommand,
+    ReferenceTrajectory,
+    VehicleState,
+    WheelTorques,
+)
 from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
 
 
@@ -39,6 +51,10 @@ class AllocatorNodeConfig(AllocatorConfig):
                                   for f in fields(AllocatorConfig)})
 
 
+#: Inputs held per topic while waiting for the other two of a stamp (lockstep).
+MAX_HELD = 100
+
+
 class AllocatorNode(Node):
     def __init__(self) -> None:
         super().__init__("allocator_node")
@@ -50,11 +66,13 @@ class AllocatorNode(Node):
         self.last_stamp_ns: int | None = None
         self.cached: WheelTorques | None = None
         self.last_valid = np.zeros(4)
-        self.reject_log = RateLimitedLog(self.get_logger().warning)
+        self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
+        self.health = NodeHealth(self)
         self.pub = self.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
-        self.create_subscription(VehicleState, "/vehicle/state",
-                                 lambda m: self._on_input(self.states, m), CONTROL_QOS)
+        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
+                                 self._on_ref, LATCHED_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
         self.create_subscription(DriveCommand, "/control/drive_command",
                                  lambda m: self._on_input(self.drives, m), CONTROL_QOS)
         self.create_subscription(MpcCommand, "/control/mpc_command",
@@ -62,9 +80,48 @@ class AllocatorNode(Node):
         self.get_logger().info(f"allocation method '{self.params.config.method}'")
 
     def _on_params(self, cfg: AllocatorNodeConfig) -> None:
-        self.alloc = TorqueAllocator(cfg.core())
+        if cfg.core() != self.alloc.cfg:
+            self.alloc = TorqueAllocator(cfg.core())
+
+    def _on_ref(self, _msg: ReferenceTrajectory) -> None:
+        """A new reference is a new run: forget every held input and answer."""
+        had = self.last_stamp_ns is not None
+        self._reset()
+        if had:
+            self.get_logger().info("new run (reference trajectory): allocator reset")
+
+    def _reset(self) -> None:
+        for d in (self.states, self.drives, self.mpcs):
+            d.clear()
+        self.last_stamp_ns, self.cached = None, None
+        self.last_valid = np.zeros(4)
+        self.gate.reset()
+        self.alloc = TorqueAllocator(self.params.config.core())
+
+    def _on_state(self, msg: VehicleState) -> None:
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        verdict = self.gate.check(stamp_ns)
+        if verdict in (Stamp.PAST, Stamp.FUTURE):
+            self.health.reject(f"{verdict.value}_stamp", stamp_ns,
+                               f"rejected state stamped {stamp_ns} ns: in the "
+                               f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
+            return
+        if verdict is Stamp.JUMPED:
+            self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, "
+                                      "allocator reset")
+            self._reset()
+            self.gate.check(stamp_ns)
+        self._on_input(self.states, msg)
 
     def _on_input(self, store: dict, msg) -> None:
+        try:
+            self._take(store, msg)
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            stamp_ns = stamp_to_ns(msg.header.stamp)
+            self.health.error("callback_error", stamp_ns, exc,
+                              f"a {type(msg).__name__} stamped {stamp_ns} ns")
+
+    def _take(self, store: dict, msg) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         if self.params.config.sync == "latest":
             store.clear()
@@ -78,8 +135,12 @@ class AllocatorNode(Node):
                 self.pub.publish(self.cached)
             return
         if self.last_stamp_ns is not None and stamp_ns < self.last_stamp_ns:
+            self.health.reject("past_stamp", stamp_ns, f"dropped a {type(msg).__name__} "
+                               f"stamped {stamp_ns} ns: already past step {self.last_stamp_ns}")
             return
         store[stamp_ns] = msg
+        if len(store) > MAX_HELD:  # strays that no state will ever match
+            del store[min(store)]
         if stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs:
             self._answer(stamp_ns, self.states.pop(stamp_ns), self.drives.pop(stamp_ns),
                          self.mpcs.pop(stamp_ns))
@@ -94,6 +155,9 @@ class AllocatorNode(Node):
         out.allocation = self.params.config.method
         out.unmet_torque = out.unmet_yaw_moment = 0.0
         try:
+            bad = implausible_fields(state, ("fz", "fy", "mu"))
+            if bad:
+                raise ValueError(f"implausible state {', '.join(bad)}")
             res = self.alloc.allocate(drive.torque, mpc.yaw_moment,
                                       np.asarray(state.fz), np.asarray(state.fy),
                                       np.asarray(state.mu))
@@ -103,9 +167,9 @@ class AllocatorNode(Node):
             out.unmet_torque = float(res.unmet_torque_nm)
             out.unmet_yaw_moment = float(res.unmet_yaw_moment_nm)
             self.last_valid = torque
-        except ValueError as exc:
-            self.reject_log(stamp_ns, f"rejected inputs at {stamp_ns} ns ({exc}); holding the "
-                            f"last valid torques")
+        except (ValueError, ArithmeticError) as exc:
+            self.health.reject("inputs", stamp_ns, f"rejected inputs at {stamp_ns} ns ({exc}); "
+                               "holding the last valid torques")
             torque = self.last_valid
             out.allocation = f"{out.allocation}:held"
         out.torque = torque.copy()

@@ -1,26 +1,32 @@
 """Speed PID node: total drive force and torque from the speed error, eq. (24).
 
-Subscribes ``/vehicle/state`` and ``/reference/trajectory`` (the speed profile); publishes
-``/control/drive_command`` stamped like the state it answers. The reference speed is taken at
-the path sample nearest to the car; its feed-forward acceleration is v·dv/ds there. A state
-stamp already answered is answered again with the cached command (the plant republishes a
-state while it waits). Non-finite states are rejected and logged; nothing is published for
-them, and nothing is published before a reference has arrived.
+Subscribes ``/vehicle/state`` (newest only) and ``/reference/trajectory`` (the speed
+profile); publishes ``/control/drive_command`` stamped like the state it answers. The
+reference speed is taken at the path sample nearest to the car; its feed-forward acceleration
+is v·dv/ds there. Input guards as in the MPC node (:mod:`fourws_common.input_guard`): a
+repeated stamp is answered from cache; a stamp in the past or far in the future, or a state
+that is not finite or not plausible, is rejected (counted, logged at a limited rate, on
+``/diagnostics``) and never reaches the integrator; a new reference or a confirmed restart of
+the stamps is a new run and resets the PID; an exception in a step is caught, logged with the
+state, and answered with the last valid command. Nothing is published before a reference has
+arrived. A parameter change keeps the integrator and filter state.
 """
 
 from __future__ import annotations
 
 from rclpy.node import Node
 
-from fourws_common.conversions import RateLimitedLog, non_finite_fields, stamp_to_ns
+from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.health import NodeHealth
+from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate, implausible_fields
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
 from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
 
-# The period assumed for the first state (no previous stamp): the graph's 100 Hz.
+# The period assumed for the first state of a run or timeline (no previous stamp): 100 Hz.
 NOMINAL_DT_S = 0.01
 
 
@@ -30,54 +36,83 @@ class SpeedPidNode(Node):
         self.params = ParamBinding(self, SpeedPidConfig, on_change=self._on_params)
         self.pid = SpeedPid(self.params.config)
         self.profile: SpeedProfile | None = None
-        self.last_stamp_ns: int | None = None
+        self.gate = StampGate(MAX_STAMP_JUMP_NS)
+        self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
-        self.reject_log = RateLimitedLog(self.get_logger().warning)
-        self.wait_log = RateLimitedLog(self.get_logger().warning, period_s=5.0)
+        self.health = NodeHealth(self)
+        self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
         self.pub = self.create_publisher(DriveCommand, "/control/drive_command", CONTROL_QOS)
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, CONTROL_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
-        integral = self.pid.integral_n
-        self.pid = SpeedPid(cfg)
-        self.pid.reset(integral)
+        self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless
+        self.get_logger().info("parameters applied (integrator state kept)")
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
             profile = SpeedProfile(msg.x, msg.y, msg.speed)
         except ValueError as exc:
-            self.get_logger().error(f"rejected reference trajectory: {exc}")
+            self.health.reject("reference", 0, f"rejected reference trajectory: {exc}")
             return
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            self.health.error("reference_error", 0, exc, f"a reference of {len(msg.x)} points")
+            return
+        new_run = self.profile is not None
         self.profile = profile
+        self._reset()
         self.get_logger().info(f"reference with {profile.speed.size} points, speed "
-                               f"{profile.speed.min():.2f}..{profile.speed.max():.2f} m/s")
+                               f"{profile.speed.min():.2f}..{profile.speed.max():.2f} m/s"
+                               + ("; new run: PID reset" if new_run else ""))
+
+    def _reset(self) -> None:
+        self.pid.reset()
+        self.gate.reset()
+        self.prev_ns = None
+        self.cached = None
 
     def _on_state(self, msg: VehicleState) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
-        if stamp_ns == self.last_stamp_ns and self.cached is not None:
-            self.pub.publish(self.cached)
-            return
-        bad = non_finite_fields(msg, ("x", "y", "vx"))
+        bad = implausible_fields(msg, ("x", "y", "vx"))
         if bad:
-            self.reject_log(stamp_ns, f"rejected vehicle state with non-finite {bad}")
+            self.health.reject("implausible_state", stamp_ns, f"rejected vehicle state at "
+                               f"{stamp_ns} ns: {', '.join(bad)}")
             return
         if self.profile is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
-        dt_s = (NOMINAL_DT_S if self.last_stamp_ns is None
-                else (stamp_ns - self.last_stamp_ns) * 1e-9)
-        if dt_s <= 0.0:
-            self.reject_log(stamp_ns, f"rejected state stamped {stamp_ns} ns: not after the "
-                            f"last one ({self.last_stamp_ns} ns)")
+        verdict = self.gate.check(stamp_ns)
+        if verdict is Stamp.REPEAT:
+            if self.cached is not None:
+                self.pub.publish(self.cached)
             return
-        v_ref, a_ref = self.profile.at(msg.x, msg.y)
-        out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
+        if verdict in (Stamp.PAST, Stamp.FUTURE):
+            self.health.reject(f"{verdict.value}_stamp", stamp_ns,
+                               f"rejected state stamped {stamp_ns} ns: in the "
+                               f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
+            return
+        if verdict is Stamp.JUMPED:
+            self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, PID "
+                                      "reset")
+            self._reset()
+            self.gate.check(stamp_ns)
+        dt_s = NOMINAL_DT_S if self.prev_ns is None else (stamp_ns - self.prev_ns) * 1e-9
+        try:
+            v_ref, a_ref = self.profile.at(msg.x, msg.y)
+            out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            self.health.error("step_error", stamp_ns, exc, f"the state at {stamp_ns} ns "
+                              f"(x={msg.x:.6g}, y={msg.y:.6g}, vx={msg.vx:.6g})")
+            if self.cached is not None:
+                self.cached.header = msg.header
+                self.pub.publish(self.cached)
+            return
+        self.prev_ns = stamp_ns
         cmd = self._cmd_msg
         cmd.header, cmd.force, cmd.torque = msg.header, out.force_n, out.torque_nm
-        self.last_stamp_ns, self.cached = stamp_ns, cmd
+        self.cached = cmd
         self.pub.publish(cmd)
 
 

@@ -358,24 +358,68 @@ class MpcController:
 
     def __init__(self, cfg: MpcConfig | None = None) -> None:
         self.cfg = cfg if cfg is not None else MpcConfig()
-        c = self.cfg
+        self.fuzzy: FuzzyWeights | None = None
+        self._apply(self.cfg, None)
+        self._stepped = False
+        self.reset()
+
+    @staticmethod
+    def _qp_settings(c: MpcConfig) -> QpSettings:
+        return QpSettings(eps_abs=c.osqp_eps_abs, eps_rel=c.osqp_eps_rel,
+                          max_iter=c.osqp_max_iter, polishing=c.osqp_polishing,
+                          accept_inaccurate=c.osqp_accept_inaccurate,
+                          check_termination=c.osqp_check_termination)
+
+    def _apply(self, c: MpcConfig, old: MpcConfig | None) -> None:
+        """Derive everything that depends on the config; rebuild only what changed."""
         self.model = c.model_params()
         self.apcha_params = c.apcha_params()
-        self.fuzzy = FuzzyWeights(c.fuzzy_spec()) if c.weights_mode == "fuzzy" else None
-        self.qp = MpcQp(QpSettings(eps_abs=c.osqp_eps_abs, eps_rel=c.osqp_eps_rel,
-                                   max_iter=c.osqp_max_iter, polishing=c.osqp_polishing,
-                                   accept_inaccurate=c.osqp_accept_inaccurate,
-                                   check_termination=c.osqp_check_termination))
+        if c.weights_mode != "fuzzy":
+            self.fuzzy = None
+        elif self.fuzzy is None or old is None or c.fuzzy_spec() != old.fuzzy_spec():
+            self.fuzzy = FuzzyWeights(c.fuzzy_spec())
+        settings = self._qp_settings(c)
+        if old is None or settings != self.qp.settings:
+            self.qp = MpcQp(settings)
         self._du_max = c.du_max
         self._u_max = c.u_max
         self._enabled = c.enabled
         if c.osqp_prebuild:
             for n_p, n_c in c.horizon_pairs():
                 self.qp.instance(n_p, n_c)
-        self.reset()
+
+    def update_config(self, cfg: MpcConfig) -> None:
+        """Apply a new configuration to the running controller without losing its state.
+
+        u(k−1), the last increment, the stored plan, the horizons (clamped into the new
+        APCHA range, or the new baseline in fixed mode), e_s(k−1) and the reference index are
+        kept; the fuzzy surface and the OSQP instances are rebuilt only if their own settings
+        changed. An equal config is a no-op.
+        """
+        old = self.cfg
+        if cfg == old:
+            return
+        self.cfg = cfg
+        self._apply(cfg, old)
+        self.u_prev = np.where(self._enabled,
+                               np.minimum(np.maximum(self.u_prev, -self._u_max), self._u_max),
+                               0.0)
+        if cfg.horizons_mode == "apcha":
+            self.n_p = min(max(self.n_p, cfg.np_min), cfg.np_max)
+            self.n_c = min(max(self.n_c, cfg.nc_min), cfg.nc_max, self.n_p)
+        else:
+            self.n_p, self.n_c = cfg.np_baseline, cfg.nc_baseline
 
     def reset(self, u_prev: np.ndarray | None = None) -> None:
-        """Forget the past: u(k−1) (default zeros), plan, horizons, reference index."""
+        """Forget the past: u(k−1) (default zeros), plan, horizons, reference index, and the
+        solvers' internal state (OSQP keeps its adapted ρ and duals between solves), so a
+        reset controller answers exactly as a new one."""
+        if self._stepped:
+            self.qp = MpcQp(self.qp.settings)
+            if self.cfg.osqp_prebuild:
+                for n_p, n_c in self.cfg.horizon_pairs():
+                    self.qp.instance(n_p, n_c)
+            self._stepped = False
         u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).copy()
         self.u_prev = np.where(self._enabled, np.clip(u, -self._u_max, self._u_max), 0.0)
         self.du_last = np.zeros(N_INPUT)
@@ -406,6 +450,7 @@ class MpcController:
         """
         c = self.cfg
         x, y, yaw, vx, vy, r = _read_state(state)
+        self._stepped = True
         if mu is not None and not math.isfinite(mu):
             raise ValueError(f"mu: not finite ({mu!r})")
         if ref is not self._ref:

@@ -77,6 +77,21 @@ def _clip(x: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.n
     return np.minimum(np.maximum(x, lo), hi)
 
 
+def _invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, Px: np.ndarray,
+                  Ax: np.ndarray) -> str:
+    """Why OSQP's data validation would reject this QP data ("" if it would not): a
+    non-finite q, P or A entry, a NaN or +inf lower / -inf upper bound, or l > u."""
+    for name, v in (("q", q), ("P", Px), ("A", Ax)):
+        if not np.all(np.isfinite(v)):
+            return f"non-finite {name}"
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo == _INF) or \
+            np.any(hi == -_INF):
+        return "bad bounds"
+    if np.any(lo > hi):
+        return "l > u"
+    return ""
+
+
 def output_matrix(rows: tuple[int, ...] = OUT_ROWS) -> np.ndarray:
     """C̃ picking ``rows`` of the augmented state, shape (len(rows), 9)."""
     C = np.zeros((len(rows), N_AUG))
@@ -335,6 +350,13 @@ class MpcQp:
         np.minimum(lo, hi, out=lo)
 
         s = inst.solver
+        bad = _invalid_data(qvec, lo, hi, Px, Ax)
+        if bad:
+            # OSQP would refuse the update (its wrapper ignores that) and solve the previous
+            # step's data: never trust that; the step is a failed solve.
+            empty = np.zeros((n_c, nu))
+            return QpSolution(False, f"invalid data: {bad}", 0, empty, empty, 0.0,
+                              np.zeros((n_c, nu)))
         s.update(q=qvec, l=lo, u=hi, Px=Px, Ax=Ax)
         if warm_du_scaled is not None:
             x0 = np.concatenate([_clip(warm_du_scaled.reshape(-1), -en, en), [0.0]])

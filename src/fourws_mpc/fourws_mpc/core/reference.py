@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fourws_common.input_guard import check_reference
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -87,8 +89,10 @@ class Reference:
                     search_ahead: int = 400) -> Reference:
         """Validate and build. Arrays of one length N ≥ 2, finite, distinct consecutive points.
 
-        Raises ``ValueError`` naming the bad array.
+        Raises ``ValueError`` naming the bad array (also for absurd magnitudes,
+        :func:`fourws_common.input_guard.check_reference`).
         """
+        check_reference(x, y, yaw, curvature, speed)
         arrs = {}
         for name, a in (("x", x), ("y", y), ("yaw", yaw), ("curvature", curvature),
                         ("speed", speed)):

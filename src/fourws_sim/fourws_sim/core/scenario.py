@@ -133,7 +133,8 @@ def _config_dir(config_dir: Path | None) -> Path:
 def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario:
     """Load a scenario by name (``<config_dir>/scenarios/<name>.yaml``, config_dir defaulting
     to the fourws_sim package's) or by file path. Vehicle overrides are merged over
-    ``<config_dir>/vehicle.yaml``. Raises ``ValueError`` with the reason."""
+    ``<config_dir>/vehicle.yaml``. Raises ``ValueError`` with the reason (an unreadable file
+    or a YAML syntax error names the file, and the line and column of the error)."""
     text = str(name_or_path)
     as_path = Path(text)
     if text.endswith((".yaml", ".yml")) or as_path.is_file():
@@ -145,13 +146,35 @@ def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario
             raise ValueError(f"scenario '{text}' not found in {path.parent} (known: {known})")
     if not path.is_file():
         raise ValueError(f"scenario file {path} does not exist")
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
+    data = _read_yaml(path)
     if not isinstance(data, Mapping):
         raise ValueError(f"{path}: expected a mapping at the top level")
     cfg = _config_dir(config_dir)
     vehicle_yaml = cfg / "vehicle.yaml"
     return scenario_from_mapping(data, vehicle_yaml=vehicle_yaml, source=path)
+
+
+def _read_yaml(path: Path) -> Any:
+    """The YAML content of a scenario file; ``ValueError`` naming the file (and, for a
+    syntax error, its line and column) when it cannot be read or parsed."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return yaml.safe_load(fh)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        cmark = getattr(exc, "context_mark", None)
+        if context and cmark is not None:
+            context += f" from line {cmark.line + 1}"
+        what = f"{problem} ({context})" if context else problem
+        what = " ".join(str(what).split())  # one line
+        raise ValueError(f"{path}: YAML syntax error{where}: {what}") from None
 
 
 def _number(section: str, key: str, value: Any, lo: float | None = None,

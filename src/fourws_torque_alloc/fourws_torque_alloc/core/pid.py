@@ -150,8 +150,8 @@ class SpeedPid:
 
         v_ref_mps, v_mps: reference and measured longitudinal speed (m/s); dt_s: period (s),
         > 0; a_ref_mps2: reference acceleration (m/s²) for the feed-forward. Raises
-        ``ValueError`` on a non-finite input or a non-positive period; the state is then
-        left unchanged.
+        ``ValueError`` on a non-finite input, a non-positive period or inputs whose products
+        overflow; the state is then left unchanged.
         """
         for name, val in (("v_ref_mps", v_ref_mps), ("v_mps", v_mps), ("dt_s", dt_s),
                           ("a_ref_mps2", a_ref_mps2)):
@@ -190,6 +190,10 @@ class SpeedPid:
         else:
             i_next = i + cfg.ki * e * dt_s
 
+        if not all(math.isfinite(v) for v in (u, force, i_next, dv_filt)):
+            # finite inputs whose products overflow (v = 1e308): never commit them
+            raise ValueError(f"SpeedPid.step: inputs v_ref={v_ref_mps!r}, v={v_mps!r}, "
+                             f"dt={dt_s!r} overflow the law; state left unchanged")
         self._integral_n = i_next
         self._v_prev = float(v_mps)
         self._dv_filt = dv_filt

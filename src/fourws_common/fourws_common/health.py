@@ -1,0 +1,90 @@
+"""What a node rejected, and why: counted, logged at a limited rate, published on /diagnostics.
+
+Every fourws node owns one :class:`NodeHealth`. ``health.reject(kind, now_ns, text)`` counts a
+rejected input (or a fallback) under ``kind`` and logs ``text`` at most once per second of
+the caller's clock per kind; ``health.error(kind, now_ns, exc, what)`` does the same for an
+exception caught in a callback, with the input that caused it. The counts go out as a
+``diagnostic_msgs/DiagnosticArray`` on ``/diagnostics`` (one DiagnosticStatus named after the
+node: OK with no rejections, WARN once any input was rejected, ERROR once a callback raised)
+every ``period_s`` of steady time and within 0.1 s of a change, so a recorded run holds the
+final counts of every node (``input_rejections`` in metrics.json).
+"""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+
+from fourws_common.conversions import RateLimitedLog
+from fourws_common.qos import DIAGNOSTICS_QOS
+
+DIAGNOSTICS_TOPIC = "/diagnostics"
+#: steady-clock period (s) of the change check; a change is published within this time.
+CHANGE_POLL_S = 0.1
+
+
+class NodeHealth:
+    """Counters of rejected inputs and caught errors of one node (see the module docstring)."""
+
+    def __init__(self, node: Node, period_s: float = 1.0) -> None:
+        self._node = node
+        self._logs: dict[str, RateLimitedLog] = {}
+        self.errors = 0
+        self._published: dict[str, int] | None = None
+        self._since_publish_s = 0.0
+        self._period_s = period_s
+        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._timer = node.create_timer(CHANGE_POLL_S, self._tick, clock=steady)
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {k: log.count for k, log in self._logs.items()}
+
+    def _log(self, kind: str, level: str = "warning") -> RateLimitedLog:
+        log = self._logs.get(kind)
+        if log is None:
+            logger = self._node.get_logger()
+            log = RateLimitedLog(getattr(logger, level))
+            self._logs[kind] = log
+        return log
+
+    def reject(self, kind: str, now_ns: int, text: str) -> None:
+        """Count one rejected input of ``kind``; log ``text`` at a limited rate."""
+        self._log(kind)(now_ns, text)
+
+    def error(self, kind: str, now_ns: int, exc: BaseException, what: str) -> None:
+        """Count an exception caught in a callback, logged with the input that caused it."""
+        self.errors += 1
+        self._log(kind, "error")(now_ns, f"{type(exc).__name__}: {exc} while handling {what}")
+
+    def level(self) -> bytes:
+        if self.errors:
+            return DiagnosticStatus.ERROR
+        return DiagnosticStatus.WARN if any(self.counts.values()) else DiagnosticStatus.OK
+
+    def _tick(self) -> None:
+        self._since_publish_s += CHANGE_POLL_S
+        counts = self.counts
+        if counts != self._published or self._since_publish_s >= self._period_s - 1e-9:
+            self.publish(counts)
+
+    def publish(self, counts: dict[str, int] | None = None) -> None:
+        counts = self.counts if counts is None else counts
+        node = self._node
+        status = DiagnosticStatus()
+        status.name = node.get_fully_qualified_name()
+        status.hardware_id = "fourws"
+        status.level = self.level()
+        total = sum(counts.values())
+        status.message = ("OK" if not total else
+                          f"{total} input(s) rejected" + (f", {self.errors} callback error(s)"
+                                                          if self.errors else ""))
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(counts.items())]
+        msg = DiagnosticArray()
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.status = [status]
+        self._pub.publish(msg)
+        self._published = dict(counts)
+        self._since_publish_s = 0.0

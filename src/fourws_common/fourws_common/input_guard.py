@@ -1,0 +1,138 @@
+"""Input checks shared by every node (pure Python + numpy, no ROS): plausible values, stamps.
+
+A node checks each message at its edge, before any value reaches a core or an integrator:
+
+- :func:`implausible_fields` — a field that is not finite or lies outside the physical range
+  of :data:`STATE_LIMITS` (a finite 1.7e308 m/s is as wrong as NaN: it overflows the first
+  product it enters);
+- :func:`check_reference` — a reference trajectory with non-finite or absurd samples;
+- :class:`StampGate` — stamps must move forward by at most ``max_jump_ns``; an equal stamp is
+  a repeat (lockstep republishes), an older one or a jump far ahead is rejected, *not*
+  adopted as the new "last" (one stray message never locks a node out of later input). A
+  jump (forward, or back to an earlier time: a restarted plant or bag) that the next stamp
+  confirms — it follows the jumped stamp by 0..``max_jump_ns`` — is a new timeline: the gate
+  accepts it and reports ``JUMPED`` so the node can reset its state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+#: Physical ranges (inclusive) of VehicleState fields, SI. Generous for any road car; a value
+#: outside is a broken sensor, a unit error or a fault injection.
+STATE_LIMITS: dict[str, tuple[float, float]] = {
+    "x": (-1e6, 1e6),            # m
+    "y": (-1e6, 1e6),            # m
+    "yaw": (-1e4, 1e4),          # rad (unwrapped yaw may grow over many turns)
+    "vx": (-100.0, 100.0),       # m/s
+    "vy": (-100.0, 100.0),       # m/s
+    "yaw_rate": (-10.0, 10.0),   # rad/s
+    "ax": (-200.0, 200.0),       # m/s²
+    "ay": (-200.0, 200.0),       # m/s²
+    "sideslip": (-math.pi, math.pi),       # rad
+    "steer_front": (-math.pi / 2, math.pi / 2),  # rad
+    "steer_rear": (-math.pi / 2, math.pi / 2),   # rad
+    "wheel_speed": (-1e4, 1e4),  # rad/s
+    "wheel_torque": (-1e5, 1e5), # N·m
+    "fx": (-1e6, 1e6),           # N
+    "fy": (-1e6, 1e6),           # N
+    "fz": (-1e3, 1e6),           # N (slightly negative: a wheel just off the ground)
+    "mu": (0.0, 5.0),            # 1
+}
+#: Reference trajectory ranges: position (m), curvature (1/m), speed (m/s).
+REF_POSITION_MAX_M = 1e6
+REF_CURVATURE_MAX = 10.0
+REF_SPEED_MAX_MPS = 100.0
+
+
+def implausible_fields(msg: Any, names: Iterable[str],
+                       limits: dict[str, tuple[float, float]] = STATE_LIMITS) -> list[str]:
+    """``["vx=1.7e+308 (range -100..100)", ...]`` for the listed fields of ``msg`` (scalars
+    or arrays) that are not finite or lie outside their range; empty if all are plausible."""
+    bad = []
+    for k in names:
+        v = np.asarray(getattr(msg, k), dtype=float)
+        lo, hi = limits.get(k, (-math.inf, math.inf))
+        ok = np.isfinite(v) & (v >= lo) & (v <= hi)
+        if not np.all(ok):
+            worst = v.reshape(-1)[int(np.argmin(ok.reshape(-1)))]
+            bad.append(f"{k}={worst:.6g} (range {lo:g}..{hi:g})")
+    return bad
+
+
+def check_reference(x, y, yaw, curvature, speed) -> None:
+    """Raise ``ValueError`` naming the first non-finite or absurd reference array."""
+    arrays = {"x": x, "y": y, "yaw": yaw, "curvature": curvature, "speed": speed}
+    n = None
+    for name, a in arrays.items():
+        a = np.asarray(a, dtype=float)
+        if a.ndim != 1 or a.size < 2:
+            raise ValueError(f"reference {name}: need a 1-D array of >= 2 samples, got shape "
+                             f"{a.shape}")
+        if n is not None and a.size != n:
+            raise ValueError(f"reference {name}: {a.size} samples, x has {n}")
+        n = a.size
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"reference {name}: holds non-finite values")
+    for name, lim in (("x", REF_POSITION_MAX_M), ("y", REF_POSITION_MAX_M),
+                      ("curvature", REF_CURVATURE_MAX)):
+        m = float(np.max(np.abs(np.asarray(arrays[name], dtype=float))))
+        if m > lim:
+            raise ValueError(f"reference {name}: |{name}| up to {m:.3g}, beyond {lim:g}")
+    sp = np.asarray(speed, dtype=float)
+    if np.any(sp < 0.0) or np.any(sp > REF_SPEED_MAX_MPS):
+        raise ValueError(f"reference speed: outside 0..{REF_SPEED_MAX_MPS:g} m/s "
+                         f"({sp.min():.3g}..{sp.max():.3g})")
+
+
+class Stamp(Enum):
+    """Verdict of :meth:`StampGate.check`."""
+
+    NEW = "new"            # later than the last, within the jump limit: process it
+    REPEAT = "repeat"      # equal to the last: answer again from cache
+    PAST = "past"          # earlier than the last: rejected
+    FUTURE = "future"      # too far ahead of the last: rejected
+    JUMPED = "jumped"      # a confirmed jump (new timeline): accept, reset state first
+
+
+class StampGate:
+    """Forward-only stamps with a bounded step; see the module docstring."""
+
+    def __init__(self, max_jump_ns: int) -> None:
+        if max_jump_ns <= 0:
+            raise ValueError(f"max_jump_ns: must be > 0, got {max_jump_ns}")
+        self.max_jump_ns = int(max_jump_ns)
+        self.last_ns: int | None = None
+        self._pending_ns: int | None = None
+
+    def reset(self) -> None:
+        self.last_ns = None
+        self._pending_ns = None
+
+    def check(self, stamp_ns: int) -> Stamp:
+        """Classify ``stamp_ns``; NEW and JUMPED make it the new last stamp."""
+        last = self.last_ns
+        if last is None:
+            self.last_ns, self._pending_ns = stamp_ns, None
+            return Stamp.NEW
+        if stamp_ns == last:
+            return Stamp.REPEAT
+        if 0 < stamp_ns - last <= self.max_jump_ns:
+            self.last_ns, self._pending_ns = stamp_ns, None
+            return Stamp.NEW
+        pending = self._pending_ns
+        if pending is not None and 0 <= stamp_ns - pending <= self.max_jump_ns:
+            self.last_ns, self._pending_ns = stamp_ns, None
+            return Stamp.JUMPED
+        self._pending_ns = stamp_ns
+        return Stamp.PAST if stamp_ns < last else Stamp.FUTURE
+
+
+#: Largest forward step between consecutive input stamps that a node accepts without
+#: confirmation (ns): 1 s, 100 periods of the 100 Hz graph.
+MAX_STAMP_JUMP_NS = 1_000_000_000
