@@ -65,6 +65,10 @@ def test_every_run_is_recorded_whole_and_the_4ws_presets_complete(runs):
         assert (folder / "bag" / "metadata.yaml").is_file(), c
     for c in ("improved", "mpc_4ws"):
         assert runs[c][1]["completed"] and runs[c][1]["steps"] > 900, (c, runs[c][1]["reason"])
+        assert runs[c][1]["exit_code"] == 0 and runs[c][1]["input_rejections"] == {}, c
+    # the run outcome is the plant's own: an abort is exit code 3 and not a death
+    m = runs["mpc_fws"][1]
+    assert m["exit_code"] == 3 and m["reason"].startswith("aborted") and "died" not in m
 
 
 @pytest.mark.parametrize(("controller", "layout", "container", "hosted"), [
@@ -80,7 +84,7 @@ def test_composed_nodes_record_the_same_run(runs, controller, layout, container,
     (folder_c, m_c), (folder_s, m_s) = runs[f"{controller}-{layout}"], runs[controller]
     assert m_c["compose"] == layout and m_s["compose"] == "none"
     assert m_c["completed"] and m_c["missing_steps"] == 0, m_c["reason"]
-    logs = {p.name for p in (folder_c / "logs").iterdir()}
+    logs = {p.name for p in (folder_c / "logs").glob("*.log")}
     alone = {"plant_node.log"} if layout == "control" else set()
     assert logs == {f"{container}.log", "recorder_node.log"} | alone, logs
     log = (folder_c / "logs" / f"{container}.log").read_text()

@@ -61,6 +61,7 @@ def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path, compose,
     process = expected.split()[0]
     assert m["completed"] is False and m["died"] == expected
     assert expected in m["reason"]
+    assert "q_y" in m["died_error"] and m["exit_code"] == 1  # the node's last error line
     assert m["compose"] == compose
     assert (out / "logs" / f"{process}.log").read_text().count("q_y") >= 1
     assert (out / "bag" / "metadata.yaml").is_file(), "the run's bag folder is kept"

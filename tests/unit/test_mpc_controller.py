@@ -174,3 +174,103 @@ def test_prebuild_creates_every_reachable_instance():
 def test_model_params_follow_the_config():
     p = MpcConfig(cornering_stiffness_front_npr=25000.0).model_params()
     assert isinstance(p, ModelParams) and p.c_cf == 25000.0
+
+
+def _states(n=120, y0=0.3):
+    """A fixed sequence of measured states (the loop closed once, then replayed)."""
+    ctrl = MpcController(_cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True))
+    ref = _straight()
+    p = ctrl.model
+    z = np.array([0.0, V, 0.0, 0.0, y0, 0.0])
+    out = []
+    for k in range(n):
+        st = VehicleSample(x=z[StateIdx.X], y=z[StateIdx.Y], yaw=z[StateIdx.PHI], vx=V,
+                           vy=z[StateIdx.VY], yaw_rate=z[StateIdx.R])
+        out.append(st)
+        r = ctrl.step(0.01 * k, st, ref)
+        u = np.array([r.delta_front, r.delta_rear, r.yaw_moment])
+        for _ in range(10):
+            z = z + 0.001 * dynamics(z, u, p)
+        z[StateIdx.VX] = V
+    return out
+
+
+def _answers(ctrl, states, ref, change_at=None, change=None):
+    out = []
+    for k, st in enumerate(states):
+        if k == change_at:
+            ctrl.update_config(change)
+        r = ctrl.step(0.01 * k, st, ref)
+        out.append((r.delta_front, r.delta_rear, r.yaw_moment, r.np, r.nc, r.q_y))
+    return out
+
+
+def test_a_reset_controller_answers_exactly_as_a_new_one():
+    """A second run against the same controller (reset at its start) equals a fresh run bit
+    for bit: the OSQP instances' adapted ρ and duals are forgotten too."""
+    cfg = _cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True, osqp_prebuild=True)
+    states, ref = _states(), _straight()
+    ctrl = MpcController(cfg)
+    first = _answers(ctrl, states, ref)
+    ctrl.reset()
+    assert _answers(ctrl, states, ref) == first
+    assert _answers(MpcController(cfg), states, ref) == first
+
+
+def test_a_parameter_change_keeps_the_controller_state():
+    cfg = _cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True)
+    states, ref = _states(), _straight()
+    base = _answers(MpcController(cfg), states, ref)
+    # an equal config is a no-op: the answers do not move by a bit
+    assert _answers(MpcController(cfg), states, ref, 60, MpcConfig(**vars(cfg))) == base
+    # a real change from step 60 on: identical before, different after, and the state at the
+    # change is the one the controller had (not a reset: the plan and horizons survive)
+    ctrl = MpcController(cfg)
+    _answers(ctrl, states[:60], ref)
+    kept = (ctrl.u_prev.copy(), ctrl.n_p, ctrl.n_c, ctrl.e_s_prev, ctrl.plan_u.copy())
+    new = MpcConfig(**{**vars(cfg), "q_y_max": 4000.0})
+    ctrl.update_config(new)
+    assert np.array_equal(ctrl.u_prev, kept[0]) and (ctrl.n_p, ctrl.n_c) == kept[1:3]
+    assert ctrl.e_s_prev == kept[3] and np.array_equal(ctrl.plan_u, kept[4])
+    changed = _answers(MpcController(cfg), states, ref, 60, new)
+    assert changed[:60] == base[:60] and changed[60:] != base[60:]
+    assert changed[60][5] == pytest.approx(base[60][5] / 2.0)  # Q_Y from the new maximum
+
+
+def test_a_finite_extreme_state_is_refused_and_does_not_poison_the_controller():
+    """x = 1e300 is finite, but it overflows the projection and the QP: the core refuses it
+    before it changes anything, and the next good state is answered as if it never came."""
+    ref = _straight()
+    good = [VehicleSample(0.16 * k, 0.1, 0.0, V, 0.0, 0.0) for k in range(3)]
+    a, b = MpcController(_cfg()), MpcController(_cfg())
+    a.step(0.0, good[0], ref)
+    b.step(0.0, good[0], ref)
+    with pytest.raises(ValueError, match="x: 1e.300 outside"):
+        a.step(0.01, VehicleSample(1e300, 0.1, 0.0, V, 0.0, 0.0), ref)
+    ra, rb = a.step(0.02, good[1], ref), b.step(0.02, good[1], ref)
+    assert ra == rb
+
+
+def test_qp_data_osqp_would_refuse_are_a_failed_solve():
+    """OSQP's wrapper ignores a refused update and would solve the previous data: the MPC
+    never lets it. Non-finite data give a failed solve naming the reason."""
+    from fourws_mpc.core.model import discretise
+
+    ctrl = MpcController(_cfg())
+    c = ctrl.cfg
+    zeta = np.array([0.0, V, 0.0, 0.0, 0.0, 0.0])
+    A, B, d = discretise(zeta, np.zeros(3), ctrl.model, c.dt_s)
+    q, r = c.effective_weights(c.q_phi, c.q_y, c.r_ddelta, c.r_dmz)
+    from fourws_mpc.core.qp import QpBounds
+
+    bounds = QpBounds(du_max=c.du_max, u_max=c.u_max, enabled=c.enabled, vy_max=1.0,
+                      r_max=1.0, band_phi=0.1, band_y=0.5)
+    ref_out = np.zeros((c.np_baseline, 2))
+    ok = ctrl.qp.solve(A, B, d, zeta, np.zeros(3), ref_out, c.np_baseline, c.nc_baseline,
+                       q, r, c.rho, bounds)
+    assert ok.ok
+    zeta_bad = zeta.copy()
+    zeta_bad[StateIdx.Y] = 1e300
+    bad = ctrl.qp.solve(A, B, d, zeta_bad, np.zeros(3), ref_out, c.np_baseline,
+                        c.nc_baseline, q, r, c.rho, bounds)
+    assert not bad.ok and bad.status.startswith("invalid data")

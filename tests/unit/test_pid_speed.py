@@ -194,3 +194,15 @@ def test_reset_clears_state():
     pid.reset()
     assert pid.integral_n == 0.0
     assert pid.step(20.0, 20.0, DT).force_n == 0.0
+
+
+def test_finite_inputs_that_overflow_raise_and_leave_the_state_unchanged():
+    """vx = 1.7e308 is finite; its products are not. The integrator never takes them."""
+    pid = SpeedPid(SpeedPidConfig())
+    pid.step(16.0, 15.0, 0.01)
+    before = (pid.integral_n, pid._v_prev, pid._dv_filt)
+    with pytest.raises(ValueError, match="overflow"):
+        pid.step(16.0, 1.7e308, 0.01)
+    assert (pid.integral_n, pid._v_prev, pid._dv_filt) == before
+    out = pid.step(16.0, 15.0, 0.01)
+    assert math.isfinite(out.force_n) and math.isfinite(pid.integral_n)

@@ -698,6 +698,19 @@ def _column(values: list[Any]) -> np.ndarray:
     return np.array(values, dtype=float)
 
 
+def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, int, Any]], int]:
+    """The messages of one per-step topic that lie on the run's timeline, in receive order,
+    and how many did not: the nodes' own stamp rule
+    (:class:`fourws_common.input_guard.StampGate`), so a stray stamped 1e6 s ahead (or in the
+    past) that every controller rejected is not a step of the run either, and the analysis
+    grid does not stretch to it."""
+    from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
+
+    gate = StampGate(MAX_STAMP_JUMP_NS)
+    kept = [row for row in stamped if gate.check(row[0]) not in (Stamp.PAST, Stamp.FUTURE)]
+    return kept, len(stamped) - len(kept)
+
+
 def _columns(stamped: list[tuple[int, int, Any]]) -> dict[str, np.ndarray]:
     """Per-step columns from ``(stamp_ns, log_time_ns, msg)``: the first message of each
     stamp, sorted by stamp; ``log_ns`` is when the recorder received it."""
@@ -746,6 +759,8 @@ class RunData:
     #: Rejected inputs per node from /diagnostics: {node: {kind: count}}, the highest count
     #: each node reported (its counters only grow within a run).
     rejections: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: Messages per topic off the run's timeline (:func:`drop_strays`), left out above.
+    strays: dict[str, int] = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
@@ -800,9 +815,14 @@ def read_run(path: str | Path) -> RunData:
             status = json.loads(status_text)
         except ValueError:
             status = {"raw": status_text}
+    strays: dict[str, int] = {}
+    for t in STEP_TOPICS:
+        per[t], n = drop_strays(per[t])
+        if n:
+            strays[t] = n
     cols = {attr: _columns(per[t]) for t, attr in STEP_TOPICS.items()}
     return RunData(path=path_out, reference=ref_arrays, status=status,
-                   message_counts=counts, rejections=rejections, **cols)
+                   message_counts=counts, rejections=rejections, strays=strays, **cols)
 
 
 def _add_rejections(out: dict[str, dict[str, int]], msg: Any) -> None:

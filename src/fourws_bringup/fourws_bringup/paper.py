@@ -170,6 +170,7 @@ def metrics_from_run(run) -> dict:
     fb = diag.get("fallback")
     m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
     m["missing_steps"] = missing_steps(run)
+    m["stray_messages"] = dict(getattr(run, "strays", {}))  # off the timeline, not scored
     # What each node rejected (inputs, stamps, caught errors), from /diagnostics; only the
     # nodes that rejected something. Absent from bags recorded before /diagnostics existed.
     m["input_rejections"] = {n: {k: v for k, v in c.items() if v}

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -86,7 +87,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             executor.spin_until_future_complete(stop, timeout_sec=1.0)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ValueError as exc:
+    except (ValueError, ParameterException) as exc:
         print(f"[fatal] {exc}", file=sys.stderr, flush=True)
         code = 2
     finally:

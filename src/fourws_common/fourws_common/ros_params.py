@@ -23,7 +23,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.exceptions import InvalidParameterTypeException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -87,6 +87,12 @@ class ParamBinding(Generic[T]):
                     f"parameter '{f.name}' of {node.get_name()}: got {given.value!r} "
                     f"({given.type_.name}), expected {type(_ros_default(f.default)).__name__}"
                 ) from None
+            except InvalidParameterValueException:
+                # outside the descriptor's range: the field's own rule says which bound
+                check_field(self._cls, f.name, given.value if given is not None else f.default)
+                raise ValueError(f"parameter '{f.name}' of {node.get_name()}: "
+                                 f"{given.value if given is not None else f.default!r} "
+                                 "is out of range") from None
             values[f.name] = node.get_parameter(f.name).value
         self.config: T = self._build(values)
         node.add_on_set_parameters_callback(self._on_set)

@@ -337,7 +337,11 @@ class PlantNode(Node):
         cfg = self.params.config
         now = time.monotonic()
         if not self.started:
-            if self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers:
+            # every subscriber has the reference before the first state: a controller that
+            # stays up across runs resets on it and answers state 0 with the new path
+            zero = Duration(seconds=0)
+            if (self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers
+                    and self.pub_ref.wait_for_all_acked(zero)):
                 self._start()
             return
         if cfg.mode == "realtime":

@@ -30,7 +30,10 @@ R_ΔMz/s_ΔMz²) with s_φ, s_Δδ in rad.
 Fallback: when OSQP does not return a trusted status (or is infeasible because of the hard
 bounds), the previous optimal plan is applied shifted by one step (u(k|k−1), then
 u(k+1|k−2), ...); when it is used up, or there was none, the last command is held. The
-result is flagged ``fallback`` and is always finite. A non-finite state raises ``ValueError``.
+result is flagged ``fallback`` and is always finite; QP data that OSQP would refuse (non-finite
+or inconsistent) are a failed solve, never an update. A non-finite state, or one outside
+the plausible ranges of :data:`fourws_common.input_guard.STATE_LIMITS`, raises
+``ValueError`` before it changes anything.
 The core never reads a clock.
 """
 
@@ -44,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from fourws_common.input_guard import STATE_LIMITS
 from fourws_common.params import from_mapping, param
 from fourws_mpc.core.apcha import ApchaParams, apcha, integrated_error
 from fourws_mpc.core.fuzzy_weights import FuzzySpec, FuzzyWeights
@@ -350,6 +354,10 @@ def _read_state(state: Any) -> tuple[float, float, float, float, float, float]:
     for name, v in zip(("x", "y", "yaw", "vx", "vy", "yaw_rate"), out, strict=True):
         if not math.isfinite(v):
             raise ValueError(f"state {name}: not finite ({v!r})")
+        lo, hi = STATE_LIMITS[name]
+        if not lo <= v <= hi:
+            # finite but absurd (x = 1e300): it would overflow the projection and the QP
+            raise ValueError(f"state {name}: {v!r} outside the plausible range {lo:g}..{hi:g}")
     return out  # type: ignore[return-value]
 
 

@@ -58,6 +58,7 @@ _ZERO_U = np.zeros(N_INPUT)
 OUT_ROWS = (StateIdx.PHI, StateIdx.Y, StateIdx.VY, StateIdx.R)
 N_OUT = len(OUT_ROWS)
 _INF = np.inf
+OSQP_INFTY = float(osqp.constant("OSQP_INFTY"))  # OSQP's infinity (1e30)
 
 
 def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
@@ -87,7 +88,8 @@ def _invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, Px: np.ndarray,
     if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo == _INF) or \
             np.any(hi == -_INF):
         return "bad bounds"
-    if np.any(lo > hi):
+    # as OSQP sees them: its wrapper clips the bounds to ±OSQP_INFTY first
+    if np.any(np.maximum(lo, -OSQP_INFTY) > np.minimum(hi, OSQP_INFTY)):
         return "l > u"
     return ""
 

@@ -1,0 +1,405 @@
+"""Run outcomes, new runs, bad input, use_sim_time and parameter changes over real processes.
+
+Each test decides its outcome from records that do not depend on DDS timing — a process's
+exit status, the plant's status file, the bag, or messages the test waited for on the graph
+— never from a message sent by a process that is exiting.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+
+from fourws_bringup import runner
+from fourws_bringup.bag import read_run
+from fourws_bringup.core.closed_loop import load_mpc_config
+from fourws_bringup.paper import score_run
+from fourws_bringup.supervisor import NodeDied, NodeSpec
+from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_ns
+from fourws_common.exit_codes import RUN_END_CODES, ExitCode
+from fourws_common.qos import CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
+from fourws_common.resources import config_dir
+from fourws_mpc.core.controller import MpcController
+from fourws_mpc.core.reference import Reference
+from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
+from fourws_sim.core.scenario import load_scenario
+from fourws_sim.core.simulator import Simulator
+
+pytestmark = pytest.mark.integration
+STEP_NS = 10_000_000
+CONTROLLER = "improved"
+
+
+@pytest.fixture
+def short_scenario(tmp_path) -> Path:
+    """dlc_60_mu05 cut at X = 40 m (about 2.4 s): the start of the first lane change."""
+    spec = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml")
+                          .read_text())
+    spec.update(name="dlc_60_short", end_x_m=40.0, duration_s=5.0)
+    path = tmp_path / "dlc_60_short.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def _plant(scenario: Path, status_file: Path, **params) -> NodeSpec:
+    return NodeSpec("plant_node", "fourws_sim", "plant_node",
+                    params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
+                    parameters={"scenario": str(scenario), "status_file": str(status_file),
+                                **params}, end_codes=RUN_END_CODES)
+
+
+def _controllers(mode: str = "lockstep") -> list[NodeSpec]:
+    specs = runner.graph_specs("dlc_60_mu05", CONTROLLER, None, mode)
+    return [s for s in specs if s.name != "plant_node"]
+
+
+def _rejections(ros) -> dict[str, dict[str, int]]:
+    """Subscribe to /diagnostics; returns the live {node: {kind: count}} of what arrives."""
+    seen: dict[str, dict[str, int]] = {}
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            seen[st.name.lstrip("/")] = {kv.key: int(kv.value) for kv in st.values}
+
+    ros.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DIAGNOSTICS_QOS)
+    return seen
+
+
+# -- run outcomes ---------------------------------------------------------------------------
+class _DeafMonitor:
+    """A run monitor that never hears the plant (it matched too late): the outcome must not
+    depend on it."""
+
+    def __init__(self, _domain_id: int) -> None:
+        self.sim_time_s, self.wall_time_s, self.status = 0.0, None, {}
+
+    def spin(self, timeout_s: float) -> None:
+        time.sleep(timeout_s)
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_outcome_does_not_depend_on_the_monitor_hearing_the_plant(
+        short_scenario, tmp_path, monkeypatch):
+    monkeypatch.setattr(runner, "_Monitor", _DeafMonitor)
+    out = tmp_path / "run"
+    outcome = runner.run_graph(str(short_scenario), CONTROLLER, out, progress=False)
+    assert outcome.completed and outcome.exit_code == 0 and outcome.died is None
+    assert outcome.reason.startswith("end of scenario") and outcome.steps > 200
+    m = score_run(out, outcome)
+    assert m["completed"] and m["exit_code"] == 0 and m["reason"] == outcome.reason
+
+
+def test_plant_exit_codes_name_the_end_of_a_run(graph, short_scenario, tmp_path):
+    """No controllers: the plant times out (4); a bad parameter is a start-up error (2)."""
+    status = tmp_path / "status.json"
+    sup = graph([_plant(short_scenario, status, command_timeout_s=0.5)])
+    assert sup.wait_exit("plant_node", timeout_s=60) == ExitCode.TIMEOUT
+    st = json.loads(status.read_text())
+    assert st["state"] == "ended" and not st["completed"] and st["exit_code"] == 4
+    assert "no /control/mpc_command and /control/wheel_torques for step 0" in st["reason"]
+    sup2 = graph([_plant(short_scenario, status, dt_s=-1.0)], start=False)
+    with pytest.raises(NodeDied) as info:
+        sup2.start(timeout_s=30)
+    assert info.value.returncode == ExitCode.BAD_CONFIG and "dt_s" in info.value.last_error
+
+
+def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
+    """mpc_fws leaves the road on dlc_60_mu05 (docs/mpc.md): ABORTED, 3."""
+    r = subprocess.run(["fourws", "run", "--scenario", "dlc_60_mu05", "--controller",
+                        "mpc_fws", "--out", str(tmp_path / "r"), "--no-plots",
+                        "--compose", "all"], capture_output=True, text=True, timeout=300)
+    m = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert r.returncode == ExitCode.ABORTED == m["exit_code"], r.stderr[-2000:]
+    assert m["reason"].startswith("aborted") and "died" not in m
+
+
+def test_unknown_and_mistyped_params_file_keys_are_errors_naming_them(graph, tmp_path):
+    for body, name in (({"np_baselin": 30}, "np_baselin"), ({"np_baseline": 12.5},
+                                                            "np_baseline")):
+        f = tmp_path / f"{name}.yaml"
+        f.write_text(yaml.safe_dump({"mpc_node": {"ros__parameters": body}}))
+        sup = graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                              params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"),
+                                            str(f)])], start=False)
+        with pytest.raises(NodeDied) as info:
+            sup.start(timeout_s=30)
+        assert info.value.returncode == ExitCode.BAD_CONFIG
+        assert name in info.value.last_error, info.value.last_lines
+    # an integer for a float parameter is a float: no error
+    f = tmp_path / "int_for_float.yaml"
+    f.write_text(yaml.safe_dump({"mpc_node": {"ros__parameters": {"rho": 1000}}}))
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(f)])])
+
+
+# -- new runs -------------------------------------------------------------------------------
+def _record_states(ros) -> list[VehicleState]:
+    got: list[VehicleState] = []
+    ros.node.create_subscription(VehicleState, "/vehicle/state", got.append, CONTROL_QOS)
+    return got
+
+
+def _trajectory(states: list[VehicleState]) -> np.ndarray:
+    first: dict[int, VehicleState] = {}
+    for m in states:
+        first.setdefault(stamp_to_ns(m.header.stamp), m)
+    return np.array([[k, m.x, m.y, m.yaw, m.vx, m.vy, m.yaw_rate, m.steer_front, m.steer_rear,
+                      *m.wheel_torque] for k, m in sorted(first.items())])
+
+
+def test_two_runs_against_the_same_controllers_equal_bit_for_bit(graph, ros, short_scenario,
+                                                                 tmp_path):
+    ctrl = graph(_controllers())
+    states = _record_states(ros)
+    runs = []
+    for i in range(2):
+        status = tmp_path / f"status{i}.json"
+        sup = graph([_plant(short_scenario, status, wait_for_subscribers=4)])
+        assert sup.wait_exit("plant_node", timeout_s=120) == 0
+        assert json.loads(status.read_text())["completed"]
+        # the plant lingers until every reliable subscriber, this test's included, has
+        # acknowledged its last state: nothing of this run is still in flight
+        runs.append(_trajectory(states))
+        states.clear()
+    assert runs[0].shape[0] > 200
+    assert np.array_equal(runs[0], runs[1])
+    ctrl.check()
+    mpc_log = (ctrl.log_dir / "mpc_node.log").read_text()
+    assert mpc_log.count("new run: controller reset") == 1
+
+
+# -- bad input ------------------------------------------------------------------------------
+def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_path):
+    """One VehicleState stamped 1e6 s ahead, published into a running lockstep graph: every
+    controller rejects it (counted on /diagnostics) and the run completes; the bag scores in
+    moments, the stray left out of its timeline."""
+    bag = tmp_path / "bag"
+    specs = runner.graph_specs("dlc_60_mu05", CONTROLLER, bag, status_file=tmp_path / "s.json")
+    specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
+    states = _record_states(ros)
+    seen = _rejections(ros)
+    stray_pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    sup = graph(specs)
+    assert ros.spin_until(lambda: any(stamp_to_ns(m.header.stamp) >= 50 * STEP_NS
+                                      for m in states), 60)
+    stray = VehicleState()
+    fill_vehicle_state(stray, {k: getattr(states[-1], k) for k in (
+        "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip", "steer_front",
+        "steer_rear", "wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")})
+    stray.header.stamp = ns_to_stamp(10**6 * 10**9)
+    stray_pub.publish(stray)
+    nodes = ("mpc_node", "speed_pid_node", "allocator_node")
+    assert ros.spin_until(lambda: all(seen.get(n, {}).get("future_stamp") == 1
+                                      for n in nodes), 60), seen
+    assert sup.wait_exit("plant_node", timeout_s=120) == 0
+    sup.stop()
+    t0 = time.monotonic()
+    m = score_run(tmp_path / "bag")
+    assert time.monotonic() - t0 < 60, "the stray stretched the analysis grid"
+    assert m["completed"] and m["missing_steps"] == 0
+    assert m["stray_messages"] == {"/vehicle/state": 1}
+    assert m["max_abs_lateral_error_m"] < 0.01
+
+
+def _ref_msg(scale: float = 1.0) -> ReferenceTrajectory:
+    p = load_scenario("dlc_60_mu05").path
+    return ReferenceTrajectory(x=(p.x * scale).tolist(), y=(p.y * scale).tolist(),
+                               yaw=p.yaw.tolist(), curvature=p.curvature.tolist(),
+                               speed=p.speed.tolist())
+
+
+def _state_msg(k: int, **kw) -> VehicleState:
+    m = VehicleState(x=0.1667 * k, y=0.02, vx=16.667)
+    m.header.stamp = ns_to_stamp(k * STEP_NS)
+    m.mu, m.fz = np.full(4, 0.5), np.full(4, 1800.0)
+    for key, v in kw.items():
+        setattr(m, key, v)
+    return m
+
+
+@pytest.mark.parametrize(("node", "topic", "bad"), [
+    ("speed_pid_node", "/control/drive_command", {"vx": 1.7e308}),
+    ("mpc_node", "/control/mpc_command", {"x": 1e300}),
+])
+def test_a_finite_extreme_is_rejected_and_never_poisons_the_node(graph, ros, node, topic, bad):
+    spec = next(s for s in _controllers() if s.name == node)
+    sup = graph([spec])
+    from fourws_msgs.msg import DriveCommand
+
+    cls = DriveCommand if node == "speed_pid_node" else MpcCommand
+    got: dict[int, object] = {}
+    ros.node.create_subscription(cls, topic, lambda m: got.setdefault(
+        stamp_to_ns(m.header.stamp), m), CONTROL_QOS)
+    seen = _rejections(ros)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0)
+    pub_ref.publish(_ref_msg())
+    pub.publish(_state_msg(0))
+    assert ros.spin_until(lambda: 0 in got, 20)  # waits until the reference is in use
+    for k in range(1, 4):
+        pub.publish(_state_msg(k, **(bad if k == 2 else {})))
+        if k != 2:
+            assert ros.spin_until(lambda k=k: k * STEP_NS in got, 20)
+        else:
+            assert ros.spin_until(lambda: seen.get(node, {}).get("implausible_state") == 1,
+                                  20), seen
+    assert 2 * STEP_NS not in got
+    values = [v for m in got.values() for v in (
+        (m.force, m.torque) if cls is DriveCommand else
+        (m.delta_front, m.delta_rear, m.yaw_moment))]
+    assert all(math.isfinite(v) for v in values)
+    sup.check()
+
+
+def test_a_poisoned_reference_is_rejected_and_the_node_keeps_answering(graph, ros):
+    sup = graph([next(s for s in _controllers() if s.name == "mpc_node")])
+    got: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command", lambda m: got.setdefault(
+        stamp_to_ns(m.header.stamp), m), CONTROL_QOS)
+    seen = _rejections(ros)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0)
+    pub_ref.publish(_ref_msg())
+    pub.publish(_state_msg(0))
+    assert ros.spin_until(lambda: 0 in got, 20)
+    pub_ref.publish(_ref_msg(1e298))
+    assert ros.spin_until(lambda: seen.get("mpc_node", {}).get("reference") == 1, 20), seen
+    for k in (1, 2):
+        pub.publish(_state_msg(k))
+        assert ros.spin_until(lambda k=k: k * STEP_NS in got, 20)
+        assert math.isfinite(got[k * STEP_NS].delta_front)
+    sup.check()
+
+
+# -- use_sim_time ---------------------------------------------------------------------------
+def test_use_sim_time_on_every_node_gives_the_same_run(short_scenario, tmp_path):
+    plain = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "a", progress=False)
+    sim = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "b", progress=False,
+                           use_sim_time=True)
+    assert plain.completed and sim.completed, (plain.reason, sim.reason)
+    ra, rb = read_run(tmp_path / "a"), read_run(tmp_path / "b")
+    for k in ("x", "y", "yaw", "steer_front", "steer_rear"):
+        assert np.array_equal(ra.state[k], rb.state[k]), k
+    for log in (tmp_path / "b" / "logs").glob("*.log"):
+        text = log.read_text()
+        assert "FATAL" not in text and "Traceback" not in text, (log.name, text[-2000:])
+
+
+# -- parameter changes ----------------------------------------------------------------------
+def test_a_parameter_set_mid_run_applies_from_that_step_and_keeps_the_state(graph, ros):
+    """The test plays the plant for mpc_node (lockstep, in-process simulator). At step 40 it
+    sets q_y_max; at step 80 it loads the node's whole parameter dump back. The commands equal
+    bit for bit an in-process controller given the same change at step 40 and nothing else:
+    no rebuild, no reset, and a load of its own values changes nothing."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+    from rclpy.parameter import Parameter
+
+    graph([next(s for s in _controllers() if s.name == "mpc_node")])
+    got: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command", lambda m: got.setdefault(
+        stamp_to_ns(m.header.stamp), m), CONTROL_QOS)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    set_cli = ros.node.create_client(SetParameters, "/mpc_node/set_parameters")
+    list_cli = ros.node.create_client(ListParameters, "/mpc_node/list_parameters")
+    get_cli = ros.node.create_client(GetParameters, "/mpc_node/get_parameters")
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0 and set_cli.service_is_ready()
+                          and list_cli.service_is_ready() and get_cli.service_is_ready(), 30)
+
+    def call(cli, req):
+        fut = cli.call_async(req)
+        assert ros.spin_until(fut.done, 30)
+        return fut.result()
+
+    scenario = load_scenario("dlc_60_mu05")
+    ref_msg = _ref_msg()
+    pub_ref.publish(ref_msg)
+    cfg = load_mpc_config(CONTROLLER)
+    oracle = MpcController(cfg)
+    ref = Reference.from_arrays(ref_msg.x, ref_msg.y, ref_msg.yaw, ref_msg.curvature,
+                                ref_msg.speed, search_back=cfg.ref_search_back,
+                                search_ahead=cfg.ref_search_ahead)
+    sim = Simulator.from_scenario(scenario)
+    torque = np.full(4, 60.0)
+    new_cfg = load_mpc_config(CONTROLLER, {"q_y_max": 4000.0})
+    for k in range(120):
+        if k == 40:
+            req = SetParameters.Request(parameters=[
+                Parameter("q_y_max", value=4000.0).to_parameter_msg()])
+            assert call(set_cli, req).results[0].successful
+            oracle.update_config(new_cfg)
+        if k == 80:  # `ros2 param load` of the node's own dump: every value set again
+            names = [n for n in call(list_cli, ListParameters.Request()).result.names
+                     if n != "start_type_description_service"]  # read-only
+            vals = call(get_cli, GetParameters.Request(names=names)).values
+            req = SetParameters.Request(parameters=[
+                ParameterMsg(name=n, value=v) for n, v in zip(names, vals, strict=True)])
+            assert all(r.successful for r in call(set_cli, req).results)
+        o = sim.outputs()
+        msg = VehicleState()
+        fill_vehicle_state(msg, o)
+        msg.header.stamp = ns_to_stamp(k * STEP_NS)
+        pub.publish(msg)
+        assert ros.spin_until(lambda k=k: k * STEP_NS in got, 30), k
+        c = got[k * STEP_NS]
+        r = oracle.step(k * 0.01, msg, ref, mu=float(np.mean(msg.mu)))
+        assert (c.delta_front, c.delta_rear, c.yaw_moment) == \
+            (r.delta_front, r.delta_rear, r.yaw_moment), k
+        sim.step(c.delta_front, c.delta_rear, torque, dt_s=0.01)
+
+
+# -- realtime -------------------------------------------------------------------------------
+def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, short_scenario,
+                                                               tmp_path):
+    """SIGSTOP the MPC for 2 s of a realtime run: the plant counts late commands and holds
+    safe (steer held, torques 0) after command_hold_timeout_s (0.5 s); resumed, the MPC
+    answers the newest state, not the 200 it missed. The bag starts at step 0."""
+    status = tmp_path / "status.json"
+    specs = runner.graph_specs(str(short_scenario), CONTROLLER, tmp_path / "bag",
+                               mode="realtime", status_file=status)
+    states = _record_states(ros)
+    sup = graph(specs)
+    mpc_pid = sup.procs["mpc_node"].popen.pid
+    assert ros.spin_until(lambda: any(stamp_to_ns(m.header.stamp) >= 100 * STEP_NS
+                                      for m in states), 60), "the run did not start"
+
+    os.kill(mpc_pid, signal.SIGSTOP)
+    try:
+        time.sleep(2.0)  # the stall itself
+    finally:
+        os.kill(mpc_pid, signal.SIGCONT)
+    assert sup.wait_exit("plant_node", timeout_s=60) in RUN_END_CODES
+    sup.stop()
+    st = json.loads(status.read_text())
+    assert st["mode"] == "realtime"
+    assert st["late_commands"] >= 100 and st["safe_hold_steps"] >= 50, st
+    run = read_run(tmp_path / "bag")
+    assert run.state["stamp_ns"][0] == 0, "the recording missed the start"
+    cmd = np.asarray(run.mpc_command["stamp_ns"])
+    gaps = np.diff(cmd) // STEP_NS
+    assert gaps.max() >= 150, "no stall seen in the MPC's answers"
+    # after the stall the MPC jumps to the newest state: at most a few stale answers
+    i = int(np.argmax(gaps))
+    assert i + 1 < len(cmd)
+    assert run.mpc_command["stamp_ns"].size < run.state["stamp_ns"].size - 150

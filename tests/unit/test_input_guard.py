@@ -1,0 +1,73 @@
+"""Input guards shared by the nodes: plausible values, sane references, forward-only stamps."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fourws_common.input_guard import (
+    Stamp,
+    StampGate,
+    check_reference,
+    implausible_fields,
+)
+
+MS = 10_000_000  # one 100 Hz step in ns
+
+
+def _state(**kw):
+    base = dict(x=1.0, y=0.5, yaw=0.1, vx=16.0, vy=0.1, yaw_rate=0.05,
+                fz=np.full(4, 1800.0), fy=np.zeros(4), mu=np.full(4, 0.5))
+    base.update(kw)
+    return SimpleNamespace(**base)
+
+
+def test_finite_extremes_are_as_implausible_as_nan():
+    names = ("x", "y", "yaw", "vx", "vy", "yaw_rate", "fz", "mu")
+    assert implausible_fields(_state(), names) == []
+    for field, value in (("vx", 1.7e308), ("x", 1e300), ("yaw_rate", math.nan),
+                         ("vy", -math.inf), ("mu", np.array([0.5, 0.5, 7.0, 0.5])),
+                         ("fz", np.array([1.0, 2.0, math.nan, 3.0]))):
+        bad = implausible_fields(_state(**{field: value}), names)
+        assert len(bad) == 1 and bad[0].startswith(f"{field}="), (field, bad)
+
+
+def test_a_poisoned_reference_is_refused_naming_the_array():
+    x = np.linspace(0.0, 100.0, 101)
+    ok = (x, 0.0 * x, 0.0 * x, 0.0 * x, 16.0 + 0.0 * x)
+    check_reference(*ok)
+    with pytest.raises(ValueError, match="reference x"):
+        check_reference(x * 1e298, *ok[1:])
+    with pytest.raises(ValueError, match="reference speed"):
+        check_reference(*ok[:4], -ok[4])
+    with pytest.raises(ValueError, match="curvature"):
+        check_reference(*ok[:3], ok[3] + 1e3, ok[4])
+    with pytest.raises(ValueError, match="non-finite"):
+        check_reference(x, x * np.nan, *ok[2:])
+
+
+def test_a_stray_future_stamp_is_rejected_and_never_becomes_the_last():
+    g = StampGate(100 * MS)
+    assert [g.check(k * MS) for k in range(3)] == [Stamp.NEW] * 3
+    assert g.check(2 * MS) is Stamp.REPEAT
+    assert g.check(10**6 * 10**9) is Stamp.FUTURE          # 1e6 s ahead: a stray
+    assert g.last_ns == 2 * MS
+    assert [g.check(k * MS) for k in range(3, 6)] == [Stamp.NEW] * 3
+    assert g.check(1 * MS) is Stamp.PAST                   # a stray from the past
+    assert g.check(6 * MS) is Stamp.NEW and g.last_ns == 6 * MS
+
+
+def test_a_confirmed_jump_is_a_new_timeline():
+    g = StampGate(100 * MS)
+    for k in range(500, 510):
+        g.check(k * MS)
+    assert g.check(0) is Stamp.PAST                        # a restarted plant's step 0 ...
+    assert g.check(0) is Stamp.JUMPED                      # ... republished: confirmed
+    assert g.check(MS) is Stamp.NEW
+    assert g.check(10**12) is Stamp.FUTURE                 # a realtime stall of 1000 s ...
+    assert g.check(10**12 + MS) is Stamp.JUMPED            # ... confirmed by the next state
+    with pytest.raises(ValueError):
+        StampGate(0)
