@@ -109,10 +109,22 @@ def test_plant_exit_codes_name_the_end_of_a_run(graph, short_scenario, tmp_path)
     st = json.loads(status.read_text())
     assert st["state"] == "ended" and not st["completed"] and st["exit_code"] == 4
     assert "no /control/mpc_command and /control/wheel_torques for step 0" in st["reason"]
-    sup2 = graph([_plant(short_scenario, status, dt_s=-1.0)], start=False)
-    with pytest.raises(NodeDied) as info:
-        sup2.start(timeout_s=30)
-    assert info.value.returncode == ExitCode.BAD_CONFIG and "dt_s" in info.value.last_error
+    rc, error = _start_fails(graph([_plant(short_scenario, status, dt_s=-1.0)], start=False),
+                             "plant_node")
+    assert rc == ExitCode.BAD_CONFIG and "dt_s" in error
+
+
+def _start_fails(sup, name: str) -> tuple[int, str]:
+    """Start a node that must fail at start-up; its exit code and last error line. It may
+    exit before or after the graph probe has seen it: both are waited for."""
+    try:
+        sup.start(timeout_s=30)
+        rc = sup.wait_exit(name, timeout_s=30)
+    except NodeDied as exc:
+        rc = exc.returncode
+    from fourws_bringup.supervisor import last_error_line
+
+    return rc, last_error_line(sup.procs[name].last_lines())
 
 
 def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
@@ -133,15 +145,17 @@ def test_unknown_and_mistyped_params_file_keys_are_errors_naming_them(graph, tmp
         sup = graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
                               params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"),
                                             str(f)])], start=False)
-        with pytest.raises(NodeDied) as info:
-            sup.start(timeout_s=30)
-        assert info.value.returncode == ExitCode.BAD_CONFIG
-        assert name in info.value.last_error, info.value.last_lines
+        rc, error = _start_fails(sup, "mpc_node")
+        assert rc == ExitCode.BAD_CONFIG and name in error, error
     # an integer for a float parameter is a float: no error
     f = tmp_path / "int_for_float.yaml"
     f.write_text(yaml.safe_dump({"mpc_node": {"ros__parameters": {"rho": 1000}}}))
-    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
-                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(f)])])
+    ok = graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                         params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(f)])])
+    # the node is up once its parameter service answers (declared after the check)
+    from rclpy.parameter_client import AsyncParameterClient  # noqa: F401  (rclpy API check)
+
+    assert ok.procs["mpc_node"].popen.poll() is None
 
 
 # -- new runs -------------------------------------------------------------------------------
@@ -149,6 +163,15 @@ def _record_states(ros) -> list[VehicleState]:
     got: list[VehicleState] = []
     ros.node.create_subscription(VehicleState, "/vehicle/state", got.append, CONTROL_QOS)
     return got
+
+
+def _drain(ros, got: list) -> None:
+    """Take what the test's readers already hold (the plant waited for their acks)."""
+    n = -1
+    while n != len(got):
+        n = len(got)
+        for _ in range(50):
+            ros.executor.spin_once(timeout_sec=0.02)
 
 
 def _trajectory(states: list[VehicleState]) -> np.ndarray:
@@ -167,7 +190,10 @@ def test_two_runs_against_the_same_controllers_equal_bit_for_bit(graph, ros, sho
     for i in range(2):
         status = tmp_path / f"status{i}.json"
         sup = graph([_plant(short_scenario, status, wait_for_subscribers=4)])
-        assert sup.wait_exit("plant_node", timeout_s=120) == 0
+        plant = sup.procs["plant_node"].popen
+        assert ros.spin_until(lambda p=plant: p.poll() is not None, 120)
+        assert plant.returncode == 0
+        _drain(ros, states)
         assert json.loads(status.read_text())["completed"]
         # the plant lingers until every reliable subscriber, this test's included, has
         # acknowledged its last state: nothing of this run is still in flight
@@ -213,6 +239,18 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
     assert m["max_abs_lateral_error_m"] < 0.01
 
 
+def _answered(ros, pub, msg: VehicleState, got: dict) -> None:
+    """Publish ``msg`` until its stamp is answered, again every 0.25 s as the plant does: the
+    first state may reach the node before the reference it needs."""
+    stamp = stamp_to_ns(msg.header.stamp)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        pub.publish(msg)
+        if ros.spin_until(lambda: stamp in got, 0.25):
+            return
+    raise AssertionError(f"state {stamp} ns was never answered")
+
+
 def _ref_msg(scale: float = 1.0) -> ReferenceTrajectory:
     p = load_scenario("dlc_60_mu05").path
     return ReferenceTrajectory(x=(p.x * scale).tolist(), y=(p.y * scale).tolist(),
@@ -249,8 +287,7 @@ def test_a_finite_extreme_is_rejected_and_never_poisons_the_node(graph, ros, nod
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0
                           and pub_ref.get_subscription_count() > 0)
     pub_ref.publish(_ref_msg())
-    pub.publish(_state_msg(0))
-    assert ros.spin_until(lambda: 0 in got, 20)  # waits until the reference is in use
+    _answered(ros, pub, _state_msg(0), got)
     for k in range(1, 4):
         pub.publish(_state_msg(k, **(bad if k == 2 else {})))
         if k != 2:
@@ -278,8 +315,7 @@ def test_a_poisoned_reference_is_rejected_and_the_node_keeps_answering(graph, ro
     assert ros.spin_until(lambda: pub.get_subscription_count() > 0
                           and pub_ref.get_subscription_count() > 0)
     pub_ref.publish(_ref_msg())
-    pub.publish(_state_msg(0))
-    assert ros.spin_until(lambda: 0 in got, 20)
+    _answered(ros, pub, _state_msg(0), got)
     pub_ref.publish(_ref_msg(1e298))
     assert ros.spin_until(lambda: seen.get("mpc_node", {}).get("reference") == 1, 20), seen
     for k in (1, 2):
@@ -291,9 +327,10 @@ def test_a_poisoned_reference_is_rejected_and_the_node_keeps_answering(graph, ro
 
 # -- use_sim_time ---------------------------------------------------------------------------
 def test_use_sim_time_on_every_node_gives_the_same_run(short_scenario, tmp_path):
-    plain = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "a", progress=False)
+    plain = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "a", progress=False,
+                             timeout_s=120)
     sim = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "b", progress=False,
-                           use_sim_time=True)
+                           use_sim_time=True, timeout_s=120)
     assert plain.completed and sim.completed, (plain.reason, sim.reason)
     ra, rb = read_run(tmp_path / "a"), read_run(tmp_path / "b")
     for k in ("x", "y", "yaw", "steer_front", "steer_rear"):
@@ -360,8 +397,7 @@ def test_a_parameter_set_mid_run_applies_from_that_step_and_keeps_the_state(grap
         msg = VehicleState()
         fill_vehicle_state(msg, o)
         msg.header.stamp = ns_to_stamp(k * STEP_NS)
-        pub.publish(msg)
-        assert ros.spin_until(lambda k=k: k * STEP_NS in got, 30), k
+        _answered(ros, pub, msg, got)
         c = got[k * STEP_NS]
         r = oracle.step(k * 0.01, msg, ref, mu=float(np.mean(msg.mu)))
         assert (c.delta_front, c.delta_rear, c.yaw_moment) == \

@@ -28,6 +28,13 @@ from fourws_torque_alloc.core.allocation import AllocatorConfig, allocate
 from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
 
 pytestmark = pytest.mark.integration
+
+
+def load_pid_yaml(path: str, node: str) -> dict:
+    """speed_pid.yaml without the node-level input keys (InputConfig)."""
+    values = load_ros_params_yaml(path, node)
+    values.pop("max_state_age_s", None)
+    return values
 CFG = config_dir("fourws_torque_alloc")
 
 
@@ -58,7 +65,7 @@ def test_speed_pid_node_answers_each_state_with_its_stamp_and_the_core_value(gra
     ros.spin_until(lambda: False, 1.0)
 
     oracle = SpeedPid(from_mapping(SpeedPidConfig,
-                                   load_ros_params_yaml(str(CFG / "speed_pid.yaml"),
+                                   load_pid_yaml(str(CFG / "speed_pid.yaml"),
                                                         "speed_pid_node")))
     speeds = [15.0, 15.2, 15.5, 15.9, 16.1]
     fz, fy, mu = [2000.0] * 4, [0.0] * 4, [0.8] * 4

@@ -16,15 +16,28 @@ MPC_YAML = config_dir("fourws_mpc") / "mpc.yaml"
 PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 
 
+
+def _core(values: dict) -> dict:
+    """The core's keys of a node's params file; the node-level input keys
+    (fourws_common.input_guard.InputConfig) hold their defaults."""
+    import dataclasses as _dc
+
+    from fourws_common.input_guard import InputConfig
+
+    node = {f.name for f in _dc.fields(InputConfig)}
+    assert from_mapping(InputConfig, {k: v for k, v in values.items() if k in node}) == \
+        InputConfig()
+    return {k: v for k, v in values.items() if k not in node}
+
 def _preset(name):
-    values = load_ros_params_yaml(str(MPC_YAML), "mpc_node")
+    values = _core(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
     path = config_dir("fourws_bringup") / "controllers" / f"{name}.yaml"
     values.update(load_ros_params_yaml(str(path), "mpc_node"))
     return from_mapping(MpcConfig, values), load_ros_params_yaml(str(path), "allocator_node")
 
 
 def test_mpc_yaml_holds_every_default():
-    values = load_ros_params_yaml(str(MPC_YAML), "mpc_node")
+    values = _core(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
     names = {f.name for f in dataclasses.fields(MpcConfig)}
     assert set(values) == names
     assert from_mapping(MpcConfig, values) == MpcConfig()
@@ -105,7 +118,7 @@ def test_cores_import_nothing_from_ros(path):
 def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
     from fourws_mpc.core.controller import equal_effect_scaling
 
-    cfg = MpcConfig.from_mapping(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    cfg = MpcConfig.from_mapping(_core(load_ros_params_yaml(str(MPC_YAML), "mpc_node")))
     derived = equal_effect_scaling(cfg, 60.0 / 3.6)
     for key, value in derived.items():
         assert getattr(cfg, key) == pytest.approx(value, rel=0.02), key

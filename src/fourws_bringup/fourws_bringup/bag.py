@@ -703,11 +703,19 @@ def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, in
     and how many did not: the nodes' own stamp rule
     (:class:`fourws_common.input_guard.StampGate`), so a stray stamped 1e6 s ahead (or in the
     past) that every controller rejected is not a step of the run either, and the analysis
-    grid does not stretch to it."""
+    grid does not stretch to it. A message less than the jump limit behind the timeline is
+    kept: it only arrived late."""
     from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
 
     gate = StampGate(MAX_STAMP_JUMP_NS)
-    kept = [row for row in stamped if gate.check(row[0]) not in (Stamp.PAST, Stamp.FUTURE)]
+    kept = []
+    for row in stamped:
+        verdict = gate.check(row[0])
+        if verdict is Stamp.FUTURE:
+            continue
+        if verdict is Stamp.PAST and gate.last_ns - row[0] > MAX_STAMP_JUMP_NS:
+            continue  # a late arrival within the window is kept (rows are sorted by stamp)
+        kept.append(row)
     return kept, len(stamped) - len(kept)
 
 

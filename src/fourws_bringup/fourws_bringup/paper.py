@@ -219,7 +219,8 @@ def step_latencies_ms(run) -> dict[str, dict[str, float]]:
 
 def missing_steps(run) -> int:
     """Step stamps absent from the bag: on the state's period grid between its first and
-    last stamp, the largest count missing from any per-step topic (0 for a complete record).
+    last stamp, the largest count missing from any per-step topic, and at least the states
+    the plant's final status counts but the bag lacks (0 for a complete record).
 
     A recorder that fell behind its subscriptions' queues loses messages without an error;
     this finds the gap from the data alone, for any bag (also recovered ones).
@@ -238,6 +239,11 @@ def missing_steps(run) -> int:
     for topic in (run.mpc_command, run.mpc_diagnostics, run.drive_command, run.wheel_torques):
         if len(topic["stamp_ns"]):
             worst = max(worst, int(np.sum(~np.isin(grid[:-1], topic["stamp_ns"]))))
+    # The plant's own count (its final status): states 0..steps, so a recording that began
+    # late or ended early is missing steps too, not only one with holes in between.
+    steps = (run.status or {}).get("steps")
+    if isinstance(steps, int) and (run.status or {}).get("state") == "ended":
+        worst = max(worst, steps + 1 - len(stamps))
     return max(worst, 0)
 
 

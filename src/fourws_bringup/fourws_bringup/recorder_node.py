@@ -41,6 +41,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -230,7 +232,8 @@ class RecorderNode(Node):
         for info in infos:
             if info is not self._pending_gate:
                 self._subscribe(info.name)
-        self.create_timer(0.05, self._check_stop)
+        self.create_timer(0.05, self._check_stop,
+            clock=RclClock(clock_type=ClockType.STEADY_TIME))  # also under use_sim_time
         self.get_logger().info(
             f"recording {len(infos)} topics to {self.writer.path} (chunks of "
             f"{cfg.chunk_size_bytes} bytes, {cfg.compression}): {', '.join(names)}")

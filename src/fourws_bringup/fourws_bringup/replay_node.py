@@ -29,6 +29,8 @@ import time
 from dataclasses import dataclass
 
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -150,7 +152,8 @@ class ReplayNode(Node):
         self._log0: int | None = None
         self._max_stamp: int | None = None
         self._waiting: tuple[int, float] | None = None
-        self._timer = self.create_timer(0.001, self._tick)
+        self._timer = self.create_timer(0.001, self._tick,
+            clock=RclClock(clock_type=ClockType.STEADY_TIME))  # also under use_sim_time
         self.get_logger().info(
             f"replaying {self.bag.path} ({', '.join(self.topics)}) at rate {cfg.rate} "
             f"({cfg.pacing}){'; lockstep on ' + cfg.lockstep_topic if self.lockstep else ''}")

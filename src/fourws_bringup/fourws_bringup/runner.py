@@ -31,6 +31,8 @@ from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorE
 
 CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 RECORDER_NICE = 10  # niceness added to the recorder process
+#: max_state_age_s of the controllers in realtime runs (5 periods).
+REALTIME_MAX_STATE_AGE_S = 0.05
 #: Process layouts of a run: container process name and the nodes it hosts (None: one
 #: process per node). The recorder is never composed: it is off the control chain.
 COMPOSE_LAYOUTS: dict[str, tuple[str, tuple[str, ...]] | None] = {
@@ -158,14 +160,18 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
         plant_params["status_file"] = str(status_file)
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
+    # realtime: a controller that fell behind skips states that waited in a queue
+    age = {} if mode == "lockstep" else {"max_state_age_s": REALTIME_MAX_STATE_AGE_S}
     specs = [
         NodeSpec("plant_node", "fourws_sim", "plant_node",
                  params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
                  parameters=plant_params, end_codes=RUN_END_CODES),
         NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
-                 params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset]),
+                 params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset],
+                 parameters=dict(age)),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
-                 params_files=[str(config_dir("fourws_torque_alloc") / "speed_pid.yaml")]),
+                 params_files=[str(config_dir("fourws_torque_alloc") / "speed_pid.yaml")],
+                 parameters=dict(age)),
         NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
                  params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
                                preset], parameters={"sync": sync}),
@@ -327,6 +333,10 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
     except KeyboardInterrupt:
         outcome = RunOutcome(False, "interrupted by the user (Ctrl-C)", time.monotonic() - t0,
                              monitor.sim_time_s if monitor else 0.0, 0)
+    except SupervisorError as exc:  # the graph never came up, or the run never ended
+        outcome = RunOutcome(False, str(exc), time.monotonic() - t0,
+                             monitor.sim_time_s if monitor else 0.0, 0)
+        stream.write(f"\n{exc}\n")
     finally:
         if monitor is not None:
             monitor.close()

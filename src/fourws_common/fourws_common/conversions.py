@@ -73,6 +73,8 @@ class RateLimitedLog:
 
     def __init__(self, log_fn, period_s: float = 1.0) -> None:
         self._log = log_fn
+        self._logger = getattr(log_fn, "__self__", None)
+        self._level = getattr(log_fn, "__name__", "")
         self._period_ns = int(period_s * 1e9)
         self._last_ns: int | None = None
         self.count = 0
@@ -80,5 +82,20 @@ class RateLimitedLog:
     def __call__(self, now_ns: int, text: str) -> None:
         self.count += 1
         if self._last_ns is None or now_ns - self._last_ns >= self._period_ns:
-            self._log(f"{text} (rejected {self.count} so far)")
+            self._emit(f"{text} (rejected {self.count} so far)")
             self._last_ns = now_ns
+
+    def _emit(self, msg: str) -> None:
+        # rclpy refuses one call site logging at two severities ("Logger severity cannot be
+        # changed between calls"): each severity gets a line of its own.
+        lg, level = self._logger, self._level
+        if lg is None:
+            self._log(msg)
+        elif level == "error":
+            lg.error(msg)
+        elif level in ("warning", "warn"):
+            lg.warning(msg)
+        elif level == "info":
+            lg.info(msg)
+        else:
+            self._log(msg)

@@ -59,6 +59,20 @@ class NodeHealth:
         self.errors += 1
         self._log(kind, "error")(now_ns, f"{type(exc).__name__}: {exc} while handling {what}")
 
+    def guard(self, topic: str, callback):
+        """``callback`` wrapped so that no exception leaves it: it is counted and logged with
+        the message that caused it (``callback_error``), and the node lives on."""
+        def guarded(msg) -> None:
+            try:
+                callback(msg)
+            except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+                stamp = getattr(getattr(msg, "header", None), "stamp", None)
+                now_ns = (int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+                          if stamp is not None else 0)
+                self.error("callback_error", now_ns, exc,
+                           f"a {type(msg).__name__} on {topic} stamped {now_ns} ns")
+        return guarded
+
     def level(self) -> bytes:
         if self.errors:
             return DiagnosticStatus.ERROR

@@ -17,11 +17,15 @@ A node checks each message at its edge, before any value reaches a core or an in
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterable
+from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
 import numpy as np
+
+from fourws_common.params import param
 
 #: Physical ranges (inclusive) of VehicleState fields, SI. Generous for any road car; a value
 #: outside is a broken sensor, a unit error or a fault injection.
@@ -136,3 +140,38 @@ class StampGate:
 #: Largest forward step between consecutive input stamps that a node accepts without
 #: confirmation (ns): 1 s, 100 periods of the 100 Hz graph.
 MAX_STAMP_JUMP_NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """Node-level input parameters of the controllers (not of their cores)."""
+
+    max_state_age_s: float = param(
+        0.0, "realtime: skip a state that arrives more than this later than the freshest "
+        "state seen so far (a backlog after a stall); 0 never skips (lockstep)",
+        lo=0.0, hi=10.0, unit="s")
+
+
+class StaleFilter:
+    """Tells a state that arrived late relative to the stream from one that is fresh.
+
+    The lag of a state is its arrival time (the node's steady clock) minus its stamp. The
+    smallest lag over the last ``window`` states is the stream's own offset (clock origin plus
+    transport delay); a state whose lag exceeds it by more than ``max_age_ns`` waited in a
+    queue — after a stall the node takes the newest state, not the backlog. Only meaningful
+    when stamps advance with wall time (realtime); ``max_age_ns`` 0 disables it.
+    """
+
+    def __init__(self, max_age_ns: int, window: int = 200) -> None:
+        self.max_age_ns = int(max_age_ns)
+        self._lags: deque[int] = deque(maxlen=window)
+
+    def reset(self) -> None:
+        self._lags.clear()
+
+    def stale(self, stamp_ns: int, now_ns: int) -> bool:
+        if self.max_age_ns <= 0:
+            return False
+        lag = now_ns - stamp_ns
+        self._lags.append(lag)
+        return lag - min(self._lags) > self.max_age_ns

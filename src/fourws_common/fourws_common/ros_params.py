@@ -121,15 +121,52 @@ class ParamBinding(Generic[T]):
 
 #: Parameters every rclpy node may be given without declaring them.
 BUILTIN_PREFIXES = ("qos_overrides.", "use_sim_time", "start_type_description_service")
+#: A params-file value of the first type is accepted for a parameter of the second.
+_WIDENING = {(Parameter.Type.INTEGER, Parameter.Type.DOUBLE),
+             (Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY)}
 
 
-def check_overrides(node: Node) -> None:
-    """Raise ``ValueError`` naming every parameter given to ``node`` (params file, ``-p``)
-    that it does not declare: a typo such as ``np_baselin`` must not run with the default."""
-    given = getattr(node, "_parameter_overrides", {})
+def params_files(argv: list[str]) -> list[str]:
+    """The ``--params-file`` paths among the ROS arguments of ``argv``, in order."""
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
+
+
+def check_overrides(node: Node, argv: list[str] | None = None) -> None:
+    """Raise ``ValueError`` naming every parameter given to ``node`` that it does not declare
+    (a typo such as ``np_baselin`` must not run with the default) or that has another type
+    than declared. rcl itself drops a later file's value of another type in silence
+    (``np_baseline: 12.5`` over an integer ran with 12), so each ``--params-file`` of
+    ``argv`` (default ``sys.argv``) is read here as well."""
+    import sys
+
+    from fourws_common.params import load_ros_params_yaml
+
+    argv = sys.argv if argv is None else argv
+    given = dict.fromkeys(getattr(node, "_parameter_overrides", {}), "the command line")
+    problems: list[str] = []
+    for path in params_files(argv):
+        try:
+            values = load_ros_params_yaml(path, node.get_name())
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{node.get_name()}: cannot read params file {path}: {exc}") \
+                from None
+        for key, value in values.items():
+            given[key] = path
+            if not node.has_parameter(key) or key.startswith(BUILTIN_PREFIXES):
+                continue
+            want = node.get_parameter(key).type_
+            try:
+                got = Parameter(key, value=value).type_
+            except TypeError:
+                got = None
+            if got != want and (got, want) not in _WIDENING:
+                problems.append(f"'{key}' in {path} is {value!r} "
+                                f"({got.name if got else type(value).__name__}), expected "
+                                f"{want.name}")
     unknown = sorted(k for k in given if not node.has_parameter(k)
                      and not k.startswith(BUILTIN_PREFIXES))
     if unknown:
-        known = sorted(node._parameters)  # noqa: SLF001 - the declared names
-        raise ValueError(f"{node.get_name()}: unknown parameter(s) {unknown} (not declared "
-                         f"by the node; check the spelling). Known: {', '.join(known)}")
+        problems.append(f"unknown parameter(s) {unknown} (not declared by the node; check "
+                        f"the spelling; given in {sorted({given[k] for k in unknown})})")
+    if problems:
+        raise ValueError(f"{node.get_name()}: " + "; ".join(problems))

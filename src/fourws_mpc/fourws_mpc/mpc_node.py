@@ -34,6 +34,8 @@ from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
+    InputConfig,
+    StaleFilter,
     Stamp,
     StampGate,
     implausible_fields,
@@ -57,6 +59,8 @@ class MpcNode(Node):
         self.ref: Reference | None = None
         self.ref_msg: ReferenceTrajectory | None = None
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
+        self.inputs = ParamBinding(self, InputConfig, on_change=self._on_inputs)
+        self.stale = StaleFilter(int(self.inputs.config.max_state_age_s * 1e9))
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
@@ -66,9 +70,12 @@ class MpcNode(Node):
         self._cmd_msg, self._diag_msg = MpcCommand(), MpcDiagnostics()
         self.pub_diag = self.create_publisher(MpcDiagnostics, "/control/mpc_diagnostics",
                                               CONTROL_QOS)
-        self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
+        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
+                                 self.health.guard("/reference/trajectory", self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state",
+                                 self.health.guard("/vehicle/state", self._on_state),
+                                 LATEST_QOS)
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 
     def _on_params(self, cfg: MpcConfig) -> None:
@@ -77,6 +84,9 @@ class MpcNode(Node):
             self.ref = self._reference(self.ref_msg)  # the search window may have changed
         self.get_logger().info(f"parameters applied to the running controller "
                                f"'{cfg.controller}' (state kept)")
+
+    def _on_inputs(self, cfg: InputConfig) -> None:
+        self.stale.max_age_ns = int(cfg.max_state_age_s * 1e9)
 
     def _reference(self, msg: ReferenceTrajectory) -> Reference:
         cfg = self.params.config
@@ -102,6 +112,7 @@ class MpcNode(Node):
     def _reset(self) -> None:
         self.ctrl.reset()
         self.gate.reset()
+        self.stale.reset()
         self.cached = None
 
     def _on_state(self, msg: VehicleState) -> None:
@@ -113,6 +124,10 @@ class MpcNode(Node):
             return
         if self.ref is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
+            return
+        if self.stale.stale(stamp_ns, time.monotonic_ns()):
+            self.health.reject("stale_state", stamp_ns, f"skipped state {stamp_ns} ns: it "
+                               "waited in a queue (a newer one follows)")
             return
         verdict = self.gate.check(stamp_ns)
         if verdict is Stamp.REPEAT:

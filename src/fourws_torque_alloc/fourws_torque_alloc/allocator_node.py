@@ -71,8 +71,11 @@ class AllocatorNode(Node):
         self.pub = self.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
-                                 self._on_ref, LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
+                                 self.health.guard("/reference/trajectory", self._on_ref),
+                                 LATCHED_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state",
+                                 self.health.guard("/vehicle/state", self._on_state),
+                                 LATEST_QOS)
         self.create_subscription(DriveCommand, "/control/drive_command",
                                  lambda m: self._on_input(self.drives, m), CONTROL_QOS)
         self.create_subscription(MpcCommand, "/control/mpc_command",

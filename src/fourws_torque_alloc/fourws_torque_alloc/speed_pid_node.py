@@ -14,11 +14,20 @@ arrived. A parameter change keeps the integrator and filter state.
 
 from __future__ import annotations
 
+import time
+
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth
-from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate, implausible_fields
+from fourws_common.input_guard import (
+    MAX_STAMP_JUMP_NS,
+    InputConfig,
+    StaleFilter,
+    Stamp,
+    StampGate,
+    implausible_fields,
+)
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
@@ -37,19 +46,27 @@ class SpeedPidNode(Node):
         self.pid = SpeedPid(self.params.config)
         self.profile: SpeedProfile | None = None
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
+        self.inputs = ParamBinding(self, InputConfig, on_change=self._on_inputs)
+        self.stale = StaleFilter(int(self.inputs.config.max_state_age_s * 1e9))
         self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
         self.pub = self.create_publisher(DriveCommand, "/control/drive_command", CONTROL_QOS)
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
-        self.create_subscription(ReferenceTrajectory, "/reference/trajectory", self._on_ref,
+        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
+                                 self.health.guard("/reference/trajectory", self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state", self._on_state, LATEST_QOS)
+        self.create_subscription(VehicleState, "/vehicle/state",
+                                 self.health.guard("/vehicle/state", self._on_state),
+                                 LATEST_QOS)
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
         self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless
         self.get_logger().info("parameters applied (integrator state kept)")
+
+    def _on_inputs(self, cfg: InputConfig) -> None:
+        self.stale.max_age_ns = int(cfg.max_state_age_s * 1e9)
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
@@ -70,6 +87,7 @@ class SpeedPidNode(Node):
     def _reset(self) -> None:
         self.pid.reset()
         self.gate.reset()
+        self.stale.reset()
         self.prev_ns = None
         self.cached = None
 
@@ -82,6 +100,10 @@ class SpeedPidNode(Node):
             return
         if self.profile is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
+            return
+        if self.stale.stale(stamp_ns, time.monotonic_ns()):
+            self.health.reject("stale_state", stamp_ns, f"skipped state {stamp_ns} ns: it "
+                               "waited in a queue (a newer one follows)")
             return
         verdict = self.gate.check(stamp_ns)
         if verdict is Stamp.REPEAT:

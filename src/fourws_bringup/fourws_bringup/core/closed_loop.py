@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from fourws_bringup.core.metrics import run_metrics
+from fourws_common.input_guard import InputConfig
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.resources import config_dir
@@ -104,7 +105,7 @@ def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) ->
     values = load_ros_params_yaml(str(config_dir("fourws_mpc") / "mpc.yaml"), "mpc_node")
     values.update(load_ros_params_yaml(str(controller_preset_path(controller)), "mpc_node"))
     values.update(overrides or {})
-    return MpcConfig.from_mapping(values)
+    return MpcConfig.from_mapping(_core_only(values))
 
 
 def load_allocator_config(controller: str | None) -> AllocatorConfig:
@@ -122,7 +123,13 @@ def load_pid_config() -> SpeedPidConfig:
     """speed_pid.yaml."""
     values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "speed_pid.yaml"),
                                   "speed_pid_node")
-    return from_mapping(SpeedPidConfig, values)
+    return from_mapping(SpeedPidConfig, _core_only(values))
+
+
+def _core_only(values: dict[str, Any]) -> dict[str, Any]:
+    """A node's params without its node-level input keys (:class:`InputConfig`)."""
+    node_keys = {f.name for f in dataclasses.fields(InputConfig)}
+    return {k: v for k, v in values.items() if k not in node_keys}
 
 
 def _plant_params() -> dict[str, Any]:
