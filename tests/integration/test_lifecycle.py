@@ -40,15 +40,20 @@ STEP_NS = 10_000_000
 CONTROLLER = "improved"
 
 
+def _cut(tmp_path: Path, end_x_m: float) -> Path:
+    """dlc_60_mu05 cut at ``end_x_m``."""
+    spec = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml")
+                          .read_text())
+    spec.update(name=f"dlc_60_to_{end_x_m:.0f}m", end_x_m=end_x_m, duration_s=15.0)
+    path = tmp_path / f"dlc_60_to_{end_x_m:.0f}m.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
 @pytest.fixture
 def short_scenario(tmp_path) -> Path:
     """dlc_60_mu05 cut at X = 40 m (about 2.4 s): the start of the first lane change."""
-    spec = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml")
-                          .read_text())
-    spec.update(name="dlc_60_short", end_x_m=40.0, duration_s=5.0)
-    path = tmp_path / "dlc_60_short.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    return _cut(tmp_path, 40.0)
 
 
 def _plant(scenario: Path, status_file: Path, **params) -> NodeSpec:
@@ -189,7 +194,8 @@ def test_two_runs_against_the_same_controllers_equal_bit_for_bit(graph, ros, sho
     runs = []
     for i in range(2):
         status = tmp_path / f"status{i}.json"
-        sup = graph([_plant(short_scenario, status, wait_for_subscribers=4)])
+        sup = graph([_plant(short_scenario, status, wait_for_subscribers=4,
+                            wait_for_reference_subscribers=3)])
         plant = sup.procs["plant_node"].popen
         assert ros.spin_until(lambda p=plant: p.poll() is not None, 120)
         assert plant.returncode == 0
@@ -406,14 +412,15 @@ def test_a_parameter_set_mid_run_applies_from_that_step_and_keeps_the_state(grap
 
 
 # -- realtime -------------------------------------------------------------------------------
-def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, short_scenario,
-                                                               tmp_path):
+def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_path):
     """SIGSTOP the MPC for 2 s of a realtime run: the plant counts late commands and holds
     safe (steer held, torques 0) after command_hold_timeout_s (0.5 s); resumed, the MPC
     answers the newest state, not the 200 it missed. The bag starts at step 0."""
     status = tmp_path / "status.json"
-    specs = runner.graph_specs(str(short_scenario), CONTROLLER, tmp_path / "bag",
+    # 100 m, about 6 s: 1 s of run, the 2 s stall, 3 s after it
+    specs = runner.graph_specs(str(_cut(tmp_path, 100.0)), CONTROLLER, tmp_path / "bag",
                                mode="realtime", status_file=status)
+    specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
     states = _record_states(ros)
     sup = graph(specs)
     mpc_pid = sup.procs["mpc_node"].popen.pid
@@ -433,9 +440,9 @@ def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, short
     run = read_run(tmp_path / "bag")
     assert run.state["stamp_ns"][0] == 0, "the recording missed the start"
     cmd = np.asarray(run.mpc_command["stamp_ns"])
-    gaps = np.diff(cmd) // STEP_NS
-    assert gaps.max() >= 150, "no stall seen in the MPC's answers"
-    # after the stall the MPC jumps to the newest state: at most a few stale answers
-    i = int(np.argmax(gaps))
-    assert i + 1 < len(cmd)
-    assert run.mpc_command["stamp_ns"].size < run.state["stamp_ns"].size - 150
+    n_states = run.state["stamp_ns"].size
+    # a backlog worked through would answer every state; the newest-state rule skips most of
+    # the ~200 the stall held back
+    assert cmd.size <= n_states - 100, (cmd.size, n_states)
+    # resumed, the MPC's next answer is to a state about 2 s later than its last before
+    assert (np.diff(cmd) // STEP_NS).max() >= 100, "the MPC worked through the backlog"

@@ -33,7 +33,7 @@ pytestmark = pytest.mark.integration
 def load_pid_yaml(path: str, node: str) -> dict:
     """speed_pid.yaml without the node-level input keys (InputConfig)."""
     values = load_ros_params_yaml(path, node)
-    values.pop("max_state_age_s", None)
+    values.pop("sync", None)
     return values
 CFG = config_dir("fourws_torque_alloc")
 

@@ -114,8 +114,9 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     m = metrics_from_run(run)
     # The plant's final status: from its status file (outcome) when the live run has one,
     # else as recorded in the bag.
+    recorded = run.status if (run.status or {}).get("state") == "ended" else None
     status = (outcome.status if outcome is not None and outcome.status else None) \
-        or run.status or {}
+        or recorded or {}
     scenario = scenario or status.get("scenario") or "unknown"
     controller = controller or (run.controller or "unknown")
     out = {"scenario": Path(scenario).stem, "controller": controller}
@@ -135,7 +136,7 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
     for key in ("late_commands", "safe_hold_steps", "overruns", "rejected_commands"):
         if isinstance(status.get(key), int):
             out[key] = status[key]
-    if outcome is not None and (outcome.status or outcome.died or not run.status):
+    if outcome is not None and (outcome.status or outcome.died or not recorded):
         out["completed"] = bool(outcome.completed)
         out["reason"] = outcome.reason
         if outcome.died:

@@ -31,8 +31,6 @@ from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorE
 
 CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 RECORDER_NICE = 10  # niceness added to the recorder process
-#: max_state_age_s of the controllers in realtime runs (5 periods).
-REALTIME_MAX_STATE_AGE_S = 0.05
 #: Process layouts of a run: container process name and the nodes it hosts (None: one
 #: process per node). The recorder is never composed: it is off the control chain.
 COMPOSE_LAYOUTS: dict[str, tuple[str, tuple[str, ...]] | None] = {
@@ -155,23 +153,22 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     preset = str(controller_preset(controller))
     subscribers = 3 + (1 if bag_dir is not None else 0)
     plant_params = {"scenario": scenario_arg(scenario), "mode": mode,
-                    "wait_for_subscribers": subscribers}
+                    "wait_for_subscribers": subscribers,
+                    "wait_for_reference_subscribers": subscribers}
     if status_file is not None:
         plant_params["status_file"] = str(status_file)
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
-    # realtime: a controller that fell behind skips states that waited in a queue
-    age = {} if mode == "lockstep" else {"max_state_age_s": REALTIME_MAX_STATE_AGE_S}
     specs = [
         NodeSpec("plant_node", "fourws_sim", "plant_node",
                  params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
                  parameters=plant_params, end_codes=RUN_END_CODES),
         NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
                  params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset],
-                 parameters=dict(age)),
+                 parameters={"sync": sync}),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
                  params_files=[str(config_dir("fourws_torque_alloc") / "speed_pid.yaml")],
-                 parameters=dict(age)),
+                 parameters={"sync": sync}),
         NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
                  params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
                                preset], parameters={"sync": sync}),
@@ -214,12 +211,13 @@ class RunOutcome:
 
     @property
     def code(self) -> ExitCode:
-        """The exit code ``fourws run`` gives for this outcome."""
-        if self.died:
+        """The exit code ``fourws run`` gives for this outcome: the plant's, when it ended the
+        run with a final status; ERROR otherwise (a death, no status, a graph failure)."""
+        if self.died or self.status is None:
             return ExitCode.ERROR
         if self.exit_code in RUN_END_CODES:
             return ExitCode(self.exit_code)
-        return ExitCode.COMPLETED if self.completed else ExitCode.ERROR
+        return ExitCode.ERROR
 
 
 def read_status_file(path: Path) -> dict | None:
@@ -314,6 +312,11 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
                     raise NodeDied(sup.describe(plant), rc, plant_proc.last_lines())
                 break
             sup.check()  # a death of another node; a normal end (exit 0) is not one
+            stopped = [n for n in sup.ended() if n != plant]
+            if stopped:  # a controller or the recorder stopped from outside: no crash,
+                raise SupervisorError(  # but the run cannot go on
+                    f"{', '.join(sup.describe(n) for n in stopped)} stopped (exit 0) before "
+                    "the run ended")
             now = time.monotonic()
             if now - t0 > timeout_s:
                 raise SupervisorError(f"run did not end within {timeout_s:.0f} s of wall time")
@@ -353,9 +356,9 @@ def _ended_outcome(exit_code: int, status: dict | None, runner_wall_s: float) ->
     from fourws_common.exit_codes import describe
 
     if status is None or status.get("state") != "ended":
-        return RunOutcome(exit_code == ExitCode.COMPLETED,
-                          f"plant exited with {describe(exit_code)} without a final status",
-                          runner_wall_s, 0.0, 0, exit_code=exit_code)
+        return RunOutcome(False, f"plant exited with {describe(exit_code)} without a final "
+                          "status (stopped before its run ended)", runner_wall_s, 0.0, 0,
+                          exit_code=exit_code)
     wall = status.get("wall_time_s")
     return RunOutcome(bool(status.get("completed", False)), str(status.get("reason", "")),
                       float(wall) if isinstance(wall, int | float) else runner_wall_s,

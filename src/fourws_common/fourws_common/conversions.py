@@ -81,7 +81,9 @@ class RateLimitedLog:
 
     def __call__(self, now_ns: int, text: str) -> None:
         self.count += 1
-        if self._last_ns is None or now_ns - self._last_ns >= self._period_ns:
+        last = self._last_ns
+        # a clock that went back (a stray stamp, a new run) must not silence the log
+        if last is None or now_ns - last >= self._period_ns or now_ns < last:
             self._emit(f"{text} (rejected {self.count} so far)")
             self._last_ns = now_ns
 

@@ -11,6 +11,7 @@ code  name             meaning
 2     BAD_CONFIG       a bad parameter, argument or input file (nothing was run)
 3     ABORTED          the run was aborted: the car left the road or spun
 4     TIMEOUT          the run ended because commands did not arrive in time
+130   INTERRUPTED      the plant was stopped (SIGINT/SIGTERM) before its run ended
 ====  ===============  ==================================================================
 """
 
@@ -25,10 +26,12 @@ class ExitCode(IntEnum):
     BAD_CONFIG = 2
     ABORTED = 3
     TIMEOUT = 4
+    INTERRUPTED = 130
 
 
 #: Exit codes with which a plant process ends a run normally (a result, not a crash).
-RUN_END_CODES = frozenset({ExitCode.COMPLETED, ExitCode.ABORTED, ExitCode.TIMEOUT})
+RUN_END_CODES = frozenset({ExitCode.COMPLETED, ExitCode.ABORTED, ExitCode.TIMEOUT,
+                           ExitCode.INTERRUPTED})
 
 
 def describe(code: int) -> str:

@@ -17,7 +17,6 @@ A node checks each message at its edge, before any value reaches a core or an in
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
@@ -146,32 +145,7 @@ MAX_STAMP_JUMP_NS = 1_000_000_000
 class InputConfig:
     """Node-level input parameters of the controllers (not of their cores)."""
 
-    max_state_age_s: float = param(
-        0.0, "realtime: skip a state that arrives more than this later than the freshest "
-        "state seen so far (a backlog after a stall); 0 never skips (lockstep)",
-        lo=0.0, hi=10.0, unit="s")
-
-
-class StaleFilter:
-    """Tells a state that arrived late relative to the stream from one that is fresh.
-
-    The lag of a state is its arrival time (the node's steady clock) minus its stamp. The
-    smallest lag over the last ``window`` states is the stream's own offset (clock origin plus
-    transport delay); a state whose lag exceeds it by more than ``max_age_ns`` waited in a
-    queue — after a stall the node takes the newest state, not the backlog. Only meaningful
-    when stamps advance with wall time (realtime); ``max_age_ns`` 0 disables it.
-    """
-
-    def __init__(self, max_age_ns: int, window: int = 200) -> None:
-        self.max_age_ns = int(max_age_ns)
-        self._lags: deque[int] = deque(maxlen=window)
-
-    def reset(self) -> None:
-        self._lags.clear()
-
-    def stale(self, stamp_ns: int, now_ns: int) -> bool:
-        if self.max_age_ns <= 0:
-            return False
-        lag = now_ns - stamp_ns
-        self._lags.append(lag)
-        return lag - min(self._lags) > self.max_age_ns
+    sync: str = param("lockstep", "lockstep: answer every state as it arrives; latest: keep "
+                      "only the newest state and answer it from a 1 ms steady timer, so a node "
+                      "that fell behind (realtime) skips the backlog",
+                      choices=("lockstep", "latest"))

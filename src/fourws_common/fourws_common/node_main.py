@@ -70,8 +70,15 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         executor = make_executor()
         for factory in factories:
             nodes.append(factory())
-            check_overrides(nodes[-1])
+            check_overrides(nodes[-1], args)
             executor.add_node(nodes[-1])
+    except (ValueError, ParameterException) as exc:  # start-up: a bad parameter or file
+        print(f"[fatal] {exc}", file=sys.stderr, flush=True)
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        return 2
+    try:
         # A node that ends by itself (the plant at the end of a scenario) sets ``done``; a
         # steady-clock timer notices it, so the executor's loop runs in C++ without a return
         # to Python after every callback (spin_once costs ~13 µs more per callback).
@@ -87,9 +94,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             executor.spin_until_future_complete(stop, timeout_sec=1.0)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, ParameterException) as exc:
-        print(f"[fatal] {exc}", file=sys.stderr, flush=True)
-        code = 2
+    except Exception as exc:  # noqa: BLE001 - a runtime error: say it in one line, exit 1
+        print(f"[fatal] {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+        code = 1
     finally:
         for node in nodes:
             code = code or getattr(node, "exit_code", 0) or 0

@@ -113,9 +113,19 @@ class ParamBinding(Generic[T]):
             return SetParametersResult(successful=False, reason=str(exc))
         if new == self.config:
             return SetParametersResult(successful=True)  # nothing changes
-        self.config = new
+        old, self.config = self.config, new
         if self._on_change is not None:
-            self._on_change(new)
+            try:
+                self._on_change(new)
+            except Exception as exc:  # noqa: BLE001 - a parameter set never kills the node
+                self.config = old
+                try:
+                    self._on_change(old)
+                except Exception:  # noqa: BLE001
+                    pass
+                self._node.get_logger().error(f"rejected parameter change: applying it "
+                                              f"raised {type(exc).__name__}: {exc}")
+                return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
 

@@ -35,11 +35,11 @@ from fourws_common.health import NodeHealth
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
     InputConfig,
-    StaleFilter,
     Stamp,
     StampGate,
     implausible_fields,
 )
+from fourws_common.latest_input import LatestInput
 from fourws_common.node_main import run_node
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
@@ -59,11 +59,14 @@ class MpcNode(Node):
         self.ref: Reference | None = None
         self.ref_msg: ReferenceTrajectory | None = None
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
-        self.inputs = ParamBinding(self, InputConfig, on_change=self._on_inputs)
-        self.stale = StaleFilter(int(self.inputs.config.max_state_age_s * 1e9))
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
+        self.latest = LatestInput(self, self.health.guard("/vehicle/state", self._on_state),
+                                  self.health)
+        self.inputs = ParamBinding(self, InputConfig,
+                                   on_change=lambda c: self.latest.set_sync(c.sync))
+        self.latest.set_sync(self.inputs.config.sync)
         self.pub_cmd = self.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
@@ -74,19 +77,19 @@ class MpcNode(Node):
                                  self.health.guard("/reference/trajectory", self._on_ref),
                                  LATCHED_QOS)
         self.create_subscription(VehicleState, "/vehicle/state",
-                                 self.health.guard("/vehicle/state", self._on_state),
+                                 self.health.guard("/vehicle/state", self.latest.offer),
                                  LATEST_QOS)
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 
     def _on_params(self, cfg: MpcConfig) -> None:
+        old = self.ctrl.cfg
         self.ctrl.update_config(cfg)
-        if self.ref_msg is not None:
-            self.ref = self._reference(self.ref_msg)  # the search window may have changed
+        window = (cfg.ref_search_back, cfg.ref_search_ahead)
+        if self.ref_msg is not None and window != (old.ref_search_back, old.ref_search_ahead):
+            self.ref = self._reference(self.ref_msg)
+            self.ctrl.adopt_reference(self.ref)  # keep the nearest-point index
         self.get_logger().info(f"parameters applied to the running controller "
                                f"'{cfg.controller}' (state kept)")
-
-    def _on_inputs(self, cfg: InputConfig) -> None:
-        self.stale.max_age_ns = int(cfg.max_state_age_s * 1e9)
 
     def _reference(self, msg: ReferenceTrajectory) -> Reference:
         cfg = self.params.config
@@ -112,7 +115,6 @@ class MpcNode(Node):
     def _reset(self) -> None:
         self.ctrl.reset()
         self.gate.reset()
-        self.stale.reset()
         self.cached = None
 
     def _on_state(self, msg: VehicleState) -> None:
@@ -125,10 +127,7 @@ class MpcNode(Node):
         if self.ref is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
-        if self.stale.stale(stamp_ns, time.monotonic_ns()):
-            self.health.reject("stale_state", stamp_ns, f"skipped state {stamp_ns} ns: it "
-                               "waited in a queue (a newer one follows)")
-            return
+        prev_ns = self.gate.last_ns
         verdict = self.gate.check(stamp_ns)
         if verdict is Stamp.REPEAT:
             if self.cached is not None:
@@ -140,12 +139,14 @@ class MpcNode(Node):
                                f"rejected state stamped {stamp_ns} ns: in the "
                                f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
             return
-        if verdict is Stamp.JUMPED:
-            self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, "
+        if verdict is Stamp.JUMPED and stamp_ns < prev_ns:
+            self.get_logger().warning(f"stamps went back to {stamp_ns} ns: new run, "
                                       "controller reset")
-            last = self.gate.last_ns
             self._reset()
-            self.gate.check(last)
+            self.gate.check(stamp_ns)
+        elif verdict is Stamp.JUMPED:
+            self.get_logger().warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} "
+                                      "ns): continuing")
         try:
             self._step(msg, stamp_ns)
         except Exception as exc:  # noqa: BLE001 - a callback never kills the node

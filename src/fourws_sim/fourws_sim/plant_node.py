@@ -89,6 +89,9 @@ class PlantNodeConfig:
                                       "this wall time", lo=0.01, hi=10.0, unit="s")
     wait_for_subscribers: int = param(0, "hold the first state until /vehicle/state has this "
                                       "many subscribers (0: start at once)", lo=0, hi=100)
+    wait_for_reference_subscribers: int = param(
+        0, "also hold the first state until /reference/trajectory has this many subscribers "
+        "(each has acknowledged the reference before the first state)", lo=0, hi=100)
     command_max_age_s: float = param(0.05, "realtime: warn about and count a command older "
                                      "than this (its stamp is the state it answered)",
                                      lo=0.0, hi=60.0, unit="s")
@@ -127,7 +130,8 @@ class PlantNode(Node):
         self.step_k = 0
         self.done = False
         self.ended = False
-        self.exit_code = 0
+        # until the run ends (_finish), a stop by SIGINT/SIGTERM is an interrupted run
+        self.exit_code = int(ExitCode.INTERRUPTED)
         self.steer_cmd = (0.0, 0.0)
         self.torque_cmd = np.zeros(4)
         self.pending_cmd: MpcCommand | None = None
@@ -217,6 +221,10 @@ class PlantNode(Node):
             return
         if self.params.config.mode == "realtime":
             stamp = stamp_to_ns(msg.header.stamp)
+            if stamp > self.step_k * self.dt_ns:
+                self.stamp_log(self._now_ns(), f"ignored mpc_command stamped {stamp} ns: "
+                               f"ahead of the plant (step {self.step_k})")
+                return
             if self.cmd_stamp_ns is not None and stamp < self.cmd_stamp_ns:
                 return  # older than the command held: out of order
             if self._valid_cmd(msg):
@@ -235,6 +243,10 @@ class PlantNode(Node):
             return
         if self.params.config.mode == "realtime":
             stamp = stamp_to_ns(msg.header.stamp)
+            if stamp > self.step_k * self.dt_ns:
+                self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped {stamp} ns: "
+                               f"ahead of the plant (step {self.step_k})")
+                return
             if self.torque_stamp_ns is not None and stamp < self.torque_stamp_ns:
                 return
             if (t := self._valid_torques(msg)) is not None:
@@ -307,7 +319,7 @@ class PlantNode(Node):
         cfg = self.params.config
         now = time.monotonic()
         if self.last_tick is not None and now - self.last_tick > 1.5 * cfg.dt_s:
-            self.overruns += 1
+            self.overruns += max(1, int((now - self.last_tick) / cfg.dt_s) - 1)  # periods lost
         self.last_tick = now
         t_ns = self.step_k * self.dt_ns
         held = [self.cmd_stamp_ns, self.torque_stamp_ns]
@@ -341,6 +353,8 @@ class PlantNode(Node):
             # stays up across runs resets on it and answers state 0 with the new path
             zero = Duration(seconds=0)
             if (self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers
+                    and self.pub_ref.get_subscription_count()
+                    >= cfg.wait_for_reference_subscribers
                     and self.pub_ref.wait_for_all_acked(zero)):
                 self._start()
             return

@@ -25,7 +25,13 @@ from rclpy.node import Node
 
 from fourws_common.conversions import stamp_to_ns
 from fourws_common.health import NodeHealth
-from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate, implausible_fields
+from fourws_common.input_guard import (
+    MAX_STAMP_JUMP_NS,
+    Stamp,
+    StampGate,
+    check_reference,
+    implausible_fields,
+)
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
@@ -86,8 +92,14 @@ class AllocatorNode(Node):
         if cfg.core() != self.alloc.cfg:
             self.alloc = TorqueAllocator(cfg.core())
 
-    def _on_ref(self, _msg: ReferenceTrajectory) -> None:
-        """A new reference is a new run: forget every held input and answer."""
+    def _on_ref(self, msg: ReferenceTrajectory) -> None:
+        """A new reference is a new run: forget every held input and answer. A reference the
+        controllers would refuse is no new run."""
+        try:
+            check_reference(msg.x, msg.y, msg.yaw, msg.curvature, msg.speed)
+        except ValueError as exc:
+            self.health.reject("reference", 0, f"rejected reference trajectory: {exc}")
+            return
         had = self.last_stamp_ns is not None
         self._reset()
         if had:

@@ -14,8 +14,6 @@ arrived. A parameter change keeps the integrator and filter state.
 
 from __future__ import annotations
 
-import time
-
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
@@ -23,11 +21,11 @@ from fourws_common.health import NodeHealth
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
     InputConfig,
-    StaleFilter,
     Stamp,
     StampGate,
     implausible_fields,
 )
+from fourws_common.latest_input import LatestInput
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
@@ -46,27 +44,27 @@ class SpeedPidNode(Node):
         self.pid = SpeedPid(self.params.config)
         self.profile: SpeedProfile | None = None
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
-        self.inputs = ParamBinding(self, InputConfig, on_change=self._on_inputs)
-        self.stale = StaleFilter(int(self.inputs.config.max_state_age_s * 1e9))
         self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
+        self.latest = LatestInput(self, self.health.guard("/vehicle/state", self._on_state),
+                                  self.health)
+        self.inputs = ParamBinding(self, InputConfig,
+                                   on_change=lambda c: self.latest.set_sync(c.sync))
+        self.latest.set_sync(self.inputs.config.sync)
         self.pub = self.create_publisher(DriveCommand, "/control/drive_command", CONTROL_QOS)
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
                                  self.health.guard("/reference/trajectory", self._on_ref),
                                  LATCHED_QOS)
         self.create_subscription(VehicleState, "/vehicle/state",
-                                 self.health.guard("/vehicle/state", self._on_state),
+                                 self.health.guard("/vehicle/state", self.latest.offer),
                                  LATEST_QOS)
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
         self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless
         self.get_logger().info("parameters applied (integrator state kept)")
-
-    def _on_inputs(self, cfg: InputConfig) -> None:
-        self.stale.max_age_ns = int(cfg.max_state_age_s * 1e9)
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
@@ -87,7 +85,6 @@ class SpeedPidNode(Node):
     def _reset(self) -> None:
         self.pid.reset()
         self.gate.reset()
-        self.stale.reset()
         self.prev_ns = None
         self.cached = None
 
@@ -101,10 +98,7 @@ class SpeedPidNode(Node):
         if self.profile is None:
             self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
-        if self.stale.stale(stamp_ns, time.monotonic_ns()):
-            self.health.reject("stale_state", stamp_ns, f"skipped state {stamp_ns} ns: it "
-                               "waited in a queue (a newer one follows)")
-            return
+        prev_ns = self.gate.last_ns
         verdict = self.gate.check(stamp_ns)
         if verdict is Stamp.REPEAT:
             if self.cached is not None:
@@ -115,11 +109,14 @@ class SpeedPidNode(Node):
                                f"rejected state stamped {stamp_ns} ns: in the "
                                f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
             return
-        if verdict is Stamp.JUMPED:
-            self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, PID "
-                                      "reset")
+        if verdict is Stamp.JUMPED and stamp_ns < prev_ns:
+            self.get_logger().warning(f"stamps went back to {stamp_ns} ns: new run, PID reset")
             self._reset()
             self.gate.check(stamp_ns)
+        elif verdict is Stamp.JUMPED:
+            self.get_logger().warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} "
+                                      "ns): continuing at the nominal period")
+            self.prev_ns = None
         dt_s = NOMINAL_DT_S if self.prev_ns is None else (stamp_ns - self.prev_ns) * 1e-9
         try:
             v_ref, a_ref = self.profile.at(msg.x, msg.y)
@@ -127,9 +124,10 @@ class SpeedPidNode(Node):
         except Exception as exc:  # noqa: BLE001 - a callback never kills the node
             self.health.error("step_error", stamp_ns, exc, f"the state at {stamp_ns} ns "
                               f"(x={msg.x:.6g}, y={msg.y:.6g}, vx={msg.vx:.6g})")
-            if self.cached is not None:
-                self.cached.header = msg.header
-                self.pub.publish(self.cached)
+            held = self._cmd_msg  # the last valid command (zeros before the first)
+            held.header = msg.header
+            self.cached = held
+            self.pub.publish(held)
             return
         self.prev_ns = stamp_ns
         cmd = self._cmd_msg

@@ -418,6 +418,12 @@ class MpcController:
         else:
             self.n_p, self.n_c = cfg.np_baseline, cfg.nc_baseline
 
+    def adopt_reference(self, ref: Reference) -> None:
+        """Use ``ref`` (the same path, e.g. with another search window) from the next step on
+        and keep the nearest-point index, instead of a global search as for a new path."""
+        if self._ref is not None:
+            self._ref = ref
+
     def reset(self, u_prev: np.ndarray | None = None) -> None:
         """Forget the past: u(k−1) (default zeros), plan, horizons, reference index, and the
         solvers' internal state (OSQP keeps its adapted ρ and duals between solves), so a
@@ -461,12 +467,9 @@ class MpcController:
         self._stepped = True
         if mu is not None and not math.isfinite(mu):
             raise ValueError(f"mu: not finite ({mu!r})")
-        if ref is not self._ref:
-            self.ref_hint = None
-            self._ref = ref
-        err = ref.errors(x, y, yaw, self.ref_hint)
+        hint = self.ref_hint if ref is self._ref else None
+        err = ref.errors(x, y, yaw, hint)
         near = err.near
-        self.ref_hint = near.index
         e_y, e_phi = err.lateral_error, err.heading_error
 
         q_y, q_phi, r_dd, r_dmz = self._weights(e_y, e_phi)
@@ -478,7 +481,6 @@ class MpcController:
             n_p, n_c = c.np_baseline, c.nc_baseline
             k_e = 0.0 if self.e_s_prev is None else abs(e_s - self.e_s_prev) / c.dt_s
             k_u = float(np.max(np.abs(self.du_last) / self._du_max))
-        self.e_s_prev = e_s
 
         zeta = np.zeros(N_STATE)
         zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = vy, vx, r
@@ -514,9 +516,12 @@ class MpcController:
             fallback = True
             u = self._fallback_input()
         u = np.where(self._enabled, np.minimum(np.maximum(u, -self._u_max), self._u_max), 0.0)
+        # the step's history is committed only here: a step that raised changed nothing
         self.du_last = u - self.u_prev
         self.u_prev = u
         self.n_p, self.n_c = n_p, n_c
+        self.e_s_prev = e_s
+        self._ref, self.ref_hint = ref, near.index
         return MpcResult(
             delta_front=float(u[InputIdx.DF]), delta_rear=float(u[InputIdx.DR]),
             yaw_moment=float(u[InputIdx.MZ]), controller=c.controller, np=int(n_p),
