@@ -49,3 +49,14 @@ def test_dds_total_counts_when_it_is_larger_and_nothing_lost_is_empty():
     assert lost_counts(gaps, {"/clock": 7}) == {"/clock": 7}
     assert lost_counts({}, {}) == {}
     assert lost_counts({"/vehicle/state": received([5])}, {}) == {}
+
+
+def test_a_stray_is_no_loss_and_a_new_run_counts_afresh():
+    """A state stamped 1e6 s ahead (rejected by every node) would have been 1e8 'missing'
+    steps; a second run into the same recorder (stamps back at 0) is no gap either; what
+    the second run loses is counted."""
+    stray = 10**8  # steps: 1e6 s
+    run1 = list(range(300))
+    run2 = [k for k in range(300) if k not in (100, 101, 102)]
+    g = received([*run1[:150], stray, *run1[150:], *run2])
+    assert g.missing(DT_NS) == 3

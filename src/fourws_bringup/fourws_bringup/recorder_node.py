@@ -47,6 +47,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
@@ -66,19 +67,33 @@ class StampGaps:
     the step period is known (:meth:`missing`). A stamp not after the last one (the lockstep
     plant's repeat of a waiting state) is no gap."""
 
-    __slots__ = ("gaps", "last_ns")
+    __slots__ = ("gaps", "gate")
 
     def __init__(self) -> None:
-        self.last_ns: int | None = None
+        self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self.gaps: dict[int, int] = {}
 
+    @property
+    def last_ns(self) -> int | None:
+        return self.gate.last_ns
+
     def add(self, stamp_ns: int) -> None:
-        last = self.last_ns
-        if last is None or stamp_ns > last:
-            if last is not None:
-                d = stamp_ns - last
+        """The nodes' stamp rule (:class:`~fourws_common.input_guard.StampGate`): a stray
+        far ahead or behind is no gap; a confirmed jump back (a new run into the same
+        recorder) starts counting afresh, and a confirmed jump ahead is no loss either."""
+        last, pending = self.gate.last_ns, self.gate.pending_ns
+        verdict = self.gate.check(stamp_ns)
+        if verdict is Stamp.NEW and last is not None:
+            steps = [stamp_ns - last]
+        elif verdict is Stamp.JUMPED and last is not None and pending is not None \
+                and pending > last:
+            # the plant stamps every step: a long run of lost messages, not a time jump
+            steps = [pending - last, stamp_ns - pending]
+        else:
+            return
+        for d in steps:
+            if d > 0:
                 self.gaps[d] = self.gaps.get(d, 0) + 1
-            self.last_ns = stamp_ns
 
     def min_gap_ns(self) -> int | None:
         """The smallest stamp difference seen (the step period once two steps followed)."""

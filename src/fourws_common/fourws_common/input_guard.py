@@ -117,6 +117,11 @@ class StampGate:
         self.last_ns = None
         self._pending_ns = None
 
+    @property
+    def pending_ns(self) -> int | None:
+        """The last rejected jump, waiting for a stamp to confirm it (None: none)."""
+        return self._pending_ns
+
     def check(self, stamp_ns: int) -> Stamp:
         """Classify ``stamp_ns``; NEW and JUMPED make it the new last stamp."""
         last = self.last_ns
