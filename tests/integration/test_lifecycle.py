@@ -242,6 +242,8 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
     assert time.monotonic() - t0 < 60, "the stray stretched the analysis grid"
     assert m["completed"] and m["missing_steps"] == 0
     assert m["stray_messages"] == {"/vehicle/state": 1}
+    for n in nodes:  # the counts reached the recorder seconds before the run ended
+        assert m["input_rejections"][n]["future_stamp"] == 1, m["input_rejections"]
     assert m["max_abs_lateral_error_m"] < 0.01
 
 

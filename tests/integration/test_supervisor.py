@@ -164,3 +164,34 @@ def test_killed_supervisor_takes_its_nodes_down(domain_id, tmp_path):
     while any(pid_alive(p) for p in pids) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not [p for p in pids if pid_alive(p)]
+
+
+def _exits(code: int, after_s: float = 0.0, line: str = "") -> list[str]:
+    body = f"import sys, time; time.sleep({after_s}); print({line!r}, flush=True); " \
+           f"sys.exit({code})"
+    return [sys.executable, "-c", body]
+
+
+def test_a_normal_end_before_the_graph_saw_it_or_between_polls_is_no_death(graph):
+    """The two races of a short run: a process that ends (exit 0, or a run outcome among its
+    end_codes) before the start-up probe has seen it in the graph, and one that ends between
+    a poll of its own state and ``check()``. Neither is a death; a code outside the end codes
+    is, with its last error line."""
+    from fourws_common.exit_codes import RUN_END_CODES
+
+    sup = graph([NodeSpec("quick", "", "", argv=_exits(0)),
+                 NodeSpec("aborts", "", "", argv=_exits(3), end_codes=RUN_END_CODES),
+                 NodeSpec("later", "", "", argv=_exits(0, 0.3))], start=False)
+    sup.start(timeout_s=30)  # none of them ever joins the graph: all ended, none died
+    sup.procs["later"].popen.wait(timeout=30)
+    for _ in range(20):  # the state a poll saw and what check() sees may differ: no matter
+        sup.check()
+    assert sup.ended() == {"quick": 0, "aborts": 3, "later": 0}
+    dead = graph([NodeSpec("dies", "", "", argv=_exits(3, 0.0, "[ERROR] [x]: bad wheel"))],
+                 start=False)
+    with pytest.raises(NodeDied) as info:
+        dead.start(timeout_s=30)
+        dead.procs["dies"].popen.wait(timeout=30)
+        dead.check()
+    assert info.value.returncode == 3 and info.value.last_error == "[ERROR] [x]: bad wheel"
+    assert "3 (ABORTED)" in str(info.value)

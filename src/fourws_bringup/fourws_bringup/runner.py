@@ -213,7 +213,11 @@ class RunOutcome:
     def code(self) -> ExitCode:
         """The exit code ``fourws run`` gives for this outcome: the plant's, when it ended the
         run with a final status; ERROR otherwise (a death, no status, a graph failure)."""
-        if self.died or self.status is None:
+        if self.died:
+            return ExitCode.ERROR
+        if self.exit_code == ExitCode.INTERRUPTED:
+            return ExitCode.INTERRUPTED
+        if self.status is None:
             return ExitCode.ERROR
         if self.exit_code in RUN_END_CODES:
             return ExitCode(self.exit_code)
@@ -335,7 +339,8 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
         stream.write(f"\n{exc}\n")
     except KeyboardInterrupt:
         outcome = RunOutcome(False, "interrupted by the user (Ctrl-C)", time.monotonic() - t0,
-                             monitor.sim_time_s if monitor else 0.0, 0)
+                             monitor.sim_time_s if monitor else 0.0, 0,
+                             exit_code=int(ExitCode.INTERRUPTED))
     except SupervisorError as exc:  # the graph never came up, or the run never ended
         outcome = RunOutcome(False, str(exc), time.monotonic() - t0,
                              monitor.sim_time_s if monitor else 0.0, 0)
