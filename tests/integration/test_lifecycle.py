@@ -22,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 from fourws_bringup import runner
 from fourws_bringup.bag import read_run
-from fourws_bringup.core.closed_loop import load_mpc_config
+from fourws_bringup.core.closed_loop import load_mpc_config, run_closed_loop
 from fourws_bringup.paper import score_run
 from fourws_bringup.supervisor import NodeDied, NodeSpec
 from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_ns
@@ -221,7 +221,6 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
     specs = runner.graph_specs("dlc_60_mu05", CONTROLLER, bag, status_file=tmp_path / "s.json")
     specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
     states = _record_states(ros)
-    seen = _rejections(ros)
     stray_pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
     sup = graph(specs)
     assert ros.spin_until(lambda: any(stamp_to_ns(m.header.stamp) >= 50 * STEP_NS
@@ -232,19 +231,23 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
         "steer_rear", "wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")})
     stray.header.stamp = ns_to_stamp(10**6 * 10**9)
     stray_pub.publish(stray)
-    nodes = ("mpc_node", "speed_pid_node", "allocator_node")
-    assert ros.spin_until(lambda: all(seen.get(n, {}).get("future_stamp") == 1
-                                      for n in nodes), 60), seen
     assert sup.wait_exit("plant_node", timeout_s=120) == 0
     sup.stop()
-    t0 = time.monotonic()
     m = score_run(tmp_path / "bag")
-    assert time.monotonic() - t0 < 60, "the stray stretched the analysis grid"
     assert m["completed"] and m["missing_steps"] == 0
     assert m["stray_messages"] == {"/vehicle/state": 1}
-    for n in nodes:  # the counts reached the recorder seconds before the run ended
-        assert m["input_rejections"][n]["future_stamp"] == 1, m["input_rejections"]
-    assert m["max_abs_lateral_error_m"] < 0.01
+    # A node took the stray and rejected it, or (keep-last 1, a second writer) the plant's
+    # next state replaced it in the node's queue before it was taken: either way nothing
+    # else was rejected, and the run is the in-process loop's bit for bit.
+    for n, counts in m["input_rejections"].items():
+        assert counts == {"future_stamp": 1}, (n, counts)
+    ref = run_closed_loop("dlc_60_mu05", CONTROLLER)
+    rec = read_run(tmp_path / "bag")
+    assert rec.state["stamp_ns"].max() < 20 * 10**9, "the stray is on the analysis grid"
+    n = ref.state["x"].size  # the in-process log has no state after the last step
+    assert rec.state["x"].size == n + 1
+    for k in ("x", "y", "yaw"):
+        assert np.array_equal(rec.state[k][:n], ref.state[k]), k
 
 
 def _answered(ros, pub, msg: VehicleState, got: dict) -> None:

@@ -470,3 +470,30 @@ def test_bag_qos_table_matches_the_graph_profiles():
         assert QOS_KINDS[kind]["depth"] == profile.depth, kind
         assert QOS_KINDS[kind]["durability"] == profile.durability.name.lower(), kind
         assert QOS_KINDS[kind]["reliability"] == profile.reliability.name.lower(), kind
+
+
+def test_rejection_counts_from_diagnostics_reach_the_metrics(tmp_path):
+    """What the nodes publish on /diagnostics (cumulative counts per kind) is in the run's
+    metrics: the highest count each node reported, only nodes that rejected something."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from fourws_bringup.paper import metrics_from_run
+
+    write_run_bag(tmp_path / "bag", steps=30)
+    w = BagWriter(tmp_path / "diag", [topic_info("/diagnostics")])
+    for t, (mpc, pid) in enumerate(((0, 0), (1, 0), (3, 0))):
+        msg = DiagnosticArray()
+        msg.status = [
+            DiagnosticStatus(name="/mpc_node", values=[KeyValue(key="future_stamp",
+                                                                value=str(mpc))]),
+            DiagnosticStatus(name="/speed_pid_node", values=[KeyValue(key="implausible_state",
+                                                                      value=str(pid))])]
+        w.write("/diagnostics", serialize_message(msg), 1000 + t)
+    w.close()
+    run = read_run(tmp_path / "diag")
+    assert run.rejections == {"mpc_node": {"future_stamp": 3},
+                              "speed_pid_node": {"implausible_state": 0}}
+    full = read_run(tmp_path / "bag")
+    assert metrics_from_run(full)["input_rejections"] == {}
+    full.rejections = run.rejections
+    assert metrics_from_run(full)["input_rejections"] == {"mpc_node": {"future_stamp": 3}}
