@@ -172,3 +172,15 @@ def test_lockstep_replay_waits_for_the_controller_answer_of_each_state(graph, ro
         assert first_arrival[k] > answered_at[k - 1], f"state {k} came before answer {k - 1}"
     assert first_arrival[slow_k + 1] - first_arrival[slow_k] >= 0.9
     assert any("0 lockstep answers missed" in x for x in sup.procs["replay_node"].last_lines())
+
+
+def test_fourws_replay_as_fast_as_possible_ends_normally(domain_id):
+    """`fourws replay --rate 0` can end before the start-up probe has seen its node in the
+    graph: that is a normal end (exit 0), not a death, on every try."""
+    import subprocess
+
+    bag = Path(__file__).resolve().parents[2] / "bags" / "improved@dlc_60_mu05"
+    for _ in range(3):
+        r = subprocess.run(["fourws", "replay", str(bag), "--rate", "0", "--domain-id",
+                            str(domain_id)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0 and "died" not in r.stderr, r.stderr[-2000:]
