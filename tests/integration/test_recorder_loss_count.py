@@ -14,6 +14,7 @@ import signal
 from pathlib import Path
 
 import pytest
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 
 from fourws_bringup.supervisor import NodeSpec
@@ -48,6 +49,10 @@ def test_closing_line_counts_every_step_stamp_missing_per_topic(graph, ros, tmp_
             c = MpcCommand()
             c.header.stamp = stamp
             cmd.publish(c)
+    # every message is in the recorder's reader before it is told to stop (its drain then
+    # takes them): the outcome never depends on how fast it was scheduled
+    for p in pubs:
+        assert p.wait_for_all_acked(Duration(seconds=30))
     proc = sup.procs["recorder_node"].popen
     os.killpg(proc.pid, signal.SIGINT)
     assert proc.wait(timeout=20) == 0
