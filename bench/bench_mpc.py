@@ -31,26 +31,24 @@ for pkg in ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", 
         sys.path.insert(0, p)
 
 from fourws_bringup.core.closed_loop import load_mpc_config, run_closed_loop  # noqa: E402
-from fourws_mpc.core.controller import MeasIdx, MpcController  # noqa: E402
+from fourws_mpc.core.controller import MpcController, VehicleSample  # noqa: E402
 
 PAIRS = ((12, 6), (30, 10))
 SCENARIO = "dlc_60_mu05"
 CONTROLLER = "improved"
 
 
-def record_trajectory() -> tuple[np.ndarray, np.ndarray, object]:
-    """Per-step measured states (n, 6) in MeasIdx order and μ (n,) of a closed-loop run."""
+def record_trajectory() -> tuple[list[VehicleSample], np.ndarray, object]:
+    """Per-step measured states and μ (n,) of a closed-loop run."""
     log = run_closed_loop(SCENARIO, CONTROLLER)
     s = log.state
-    states = np.zeros((log.steps, len(MeasIdx)))
-    for idx, key in ((MeasIdx.X, "x"), (MeasIdx.Y, "y"), (MeasIdx.YAW, "yaw"),
-                     (MeasIdx.VX, "vx"), (MeasIdx.VY, "vy"), (MeasIdx.YAW_RATE, "yaw_rate")):
-        states[:, idx] = s[key]
+    keys = ("x", "y", "yaw", "vx", "vy", "yaw_rate")
+    states = [VehicleSample(*(float(s[k][i]) for k in keys)) for i in range(log.steps)]
     mu = s["mu"].mean(axis=1)
     return states, mu, log.reference
 
 
-def bench_pair(n_p: int, n_c: int, states: np.ndarray, mu: np.ndarray, ref, steps: int
+def bench_pair(n_p: int, n_c: int, states: list[VehicleSample], mu: np.ndarray, ref, steps: int
                ) -> dict:
     cfg = load_mpc_config(CONTROLLER, {"horizons_mode": "fixed", "np_baseline": n_p,
                                        "nc_baseline": n_c})

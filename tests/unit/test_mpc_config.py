@@ -9,7 +9,7 @@ import pytest
 
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
-from fourws_mpc.core.controller import MpcConfig
+from fourws_mpc.core.config import MpcConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 MPC_YAML = config_dir("fourws_mpc") / "mpc.yaml"
@@ -116,7 +116,7 @@ def test_cores_import_nothing_from_ros(path):
 
 
 def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
-    from fourws_mpc.core.controller import equal_effect_scaling
+    from fourws_mpc.core.cost_scaling import equal_effect_scaling
 
     cfg = MpcConfig.from_mapping(_core(load_ros_params_yaml(str(MPC_YAML), "mpc_node")))
     derived = equal_effect_scaling(cfg, 60.0 / 3.6)

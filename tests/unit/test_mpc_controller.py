@@ -5,7 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from fourws_mpc.core.controller import MeasIdx, MpcConfig, MpcController, VehicleSample
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.controller import MpcController, VehicleSample
+from fourws_mpc.core.cost_scaling import effective_weights
 from fourws_mpc.core.model import ModelParams, StateIdx, dynamics
 from fourws_mpc.core.qp import QpSolution
 from fourws_mpc.core.reference import Reference
@@ -27,7 +29,7 @@ def _cfg(**kw):
 
 def _simulate(ctrl, ref, y0=0.3, steps=300):
     """Closed loop on the nonlinear model of eq. (1) at constant speed (the PID's job)."""
-    p = ctrl.model
+    p = ctrl.model.params
     z = np.array([0.0, V, 0.0, 0.0, y0, 0.0])
     out = []
     for k in range(steps):
@@ -79,21 +81,21 @@ def test_fuzzy_apcha_mode_reports_adaptive_parameters():
     assert r0.e_s == pytest.approx(0.4 / 0.5, abs=1e-6)
 
 
-def test_accepts_array_state_and_rejects_non_finite():
+def test_takes_one_state_type_and_rejects_non_finite():
     ctrl = MpcController(_cfg())
     ref = _straight()
-    s = np.zeros(len(MeasIdx))
-    s[MeasIdx.VX] = V
-    s[MeasIdx.Y] = 0.1
+    s = VehicleSample(x=0.0, y=0.1, yaw=0.0, vx=V, vy=0.0, yaw_rate=0.0)
     r = ctrl.step(0.0, s, ref)
     assert r.lateral_error == pytest.approx(0.1)
-    for idx in MeasIdx:
-        bad = s.copy()
-        bad[idx] = math.nan
-        with pytest.raises(ValueError, match=idx.name.lower()):
+    fields = ("x", "y", "yaw", "vx", "vy", "yaw_rate")
+    for name in fields:
+        bad = VehicleSample(**{k: (math.nan if k == name else getattr(s, k)) for k in fields})
+        with pytest.raises(ValueError, match=name):
             ctrl.step(0.01, bad, ref)
-    with pytest.raises(ValueError):
-        ctrl.step(0.01, s[:4], ref)
+    with pytest.raises(TypeError, match="VehicleSample"):
+        ctrl.step(0.01, np.array([0.0, 0.1, 0.0, V, 0.0, 0.0]), ref)
+    # anything with the six attributes converts
+    assert VehicleSample.of(s) == s
 
 
 def _fail(*_args, **_kwargs):
@@ -172,7 +174,7 @@ def test_prebuild_creates_every_reachable_instance():
 
 
 def test_model_params_follow_the_config():
-    p = MpcConfig(cornering_stiffness_front_npr=25000.0).model_params()
+    p = MpcConfig(cornering_stiffness_front_n_per_rad=25000.0).model_params()
     assert isinstance(p, ModelParams) and p.c_cf == 25000.0
 
 
@@ -180,7 +182,7 @@ def _states(n=120, y0=0.3):
     """A fixed sequence of measured states (the loop closed once, then replayed)."""
     ctrl = MpcController(_cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True))
     ref = _straight()
-    p = ctrl.model
+    p = ctrl.model.params
     z = np.array([0.0, V, 0.0, 0.0, y0, 0.0])
     out = []
     for k in range(n):
@@ -254,13 +256,11 @@ def test_a_finite_extreme_state_is_refused_and_does_not_poison_the_controller():
 def test_qp_data_osqp_would_refuse_are_a_failed_solve():
     """OSQP's wrapper ignores a refused update and would solve the previous data: the MPC
     never lets it. Non-finite data give a failed solve naming the reason."""
-    from fourws_mpc.core.model import discretise
-
     ctrl = MpcController(_cfg())
     c = ctrl.cfg
     zeta = np.array([0.0, V, 0.0, 0.0, 0.0, 0.0])
-    A, B, d = discretise(zeta, np.zeros(3), ctrl.model, c.dt_s)
-    q, r = c.effective_weights(c.q_phi, c.q_y, c.r_ddelta, c.r_dmz)
+    A, B, d = ctrl.model.discretise(zeta, np.zeros(3), c.dt_s)
+    q, r = effective_weights(c, c.q_phi, c.q_y, c.r_ddelta, c.r_dmz)
     from fourws_mpc.core.qp import QpBounds
 
     bounds = QpBounds(du_max=c.du_max, u_max=c.u_max, enabled=c.enabled, vy_max=1.0,

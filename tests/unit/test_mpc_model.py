@@ -56,15 +56,15 @@ def test_input_jacobian_entries_are_the_corrected_ones():
     S, I = StateIdx, InputIdx
     assert B[S.VY, I.DF] == pytest.approx(2 * P.c_cf / P.mass_kg)
     assert B[S.VY, I.DR] == pytest.approx(2 * P.c_cr / P.mass_kg)
-    assert B[S.R, I.DF] == pytest.approx(2 * P.a_m * P.c_cf / P.yaw_inertia_kgm2)
-    assert B[S.R, I.DR] == pytest.approx(-2 * P.b_m * P.c_cr / P.yaw_inertia_kgm2)
-    assert B[S.R, I.MZ] == pytest.approx(1 / P.yaw_inertia_kgm2)
+    assert B[S.R, I.DF] == pytest.approx(2 * P.a_m * P.c_cf / P.yaw_inertia_kg_m2)
+    assert B[S.R, I.DR] == pytest.approx(-2 * P.b_m * P.c_cr / P.yaw_inertia_kg_m2)
+    assert B[S.R, I.MZ] == pytest.approx(1 / P.yaw_inertia_kg_m2)
 
 
 def test_yaw_moment_enters_as_mz_over_iz():
     z = np.array([0.3, 15.0, 0.1, 0.2, 0.0, 0.0])
     d = dynamics(z, np.array([0.02, 0.01, 600.0]), P) - dynamics(z, np.array([0.02, 0.01, 0.0]), P)
-    assert d[StateIdx.R] == pytest.approx(600.0 / P.yaw_inertia_kgm2)
+    assert d[StateIdx.R] == pytest.approx(600.0 / P.yaw_inertia_kg_m2)
     assert np.count_nonzero(np.abs(d) > 1e-12) == 1
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fourws_mpc.core import qp as Q
+from fourws_mpc.core import qp_solver as S
 from fourws_mpc.core.model import ModelParams, StateIdx, discretise
 
 P = ModelParams()
@@ -85,7 +86,7 @@ def test_unconstrained_solution_matches_batch_least_squares(n_p, n_c):
     ref = np.column_stack([np.linspace(0, 0.002, n_p), z[StateIdx.Y] + np.linspace(0, 0.01, n_p)])
     q = np.array([50.0, 40.0])
     r = np.array([2e4, 2e4, 1e-4])
-    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000, polishing=True))
+    qp = Q.MpcQp(S.QpSettings(eps_abs=1e-9, eps_rel=1e-9, max_iter=100000, polishing=True))
     sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, q, r, 1e3, _bounds())
     assert sol.ok, sol.status
     expected = _batch_ls_oracle(Ak, Bk, dk, z, u, ref, n_p, n_c, q, r)
@@ -112,7 +113,7 @@ def test_first_move_matches_finite_horizon_lqr():
         Pm = (Qy if i >= 1 else 0 * Qy) + Aa.T @ Pm @ (Aa - Ba @ K)
     xi = np.concatenate([z, u])
     du0 = -K @ xi
-    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polishing=True))
+    qp = Q.MpcQp(S.QpSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polishing=True))
     sol = qp.solve(Ak, Bk, dk, z, u, np.zeros((n, 2)), n, n, q, r, 1e3,
                    _bounds(band=(100.0, 100.0)))
     assert sol.ok
@@ -127,7 +128,7 @@ def test_constraints_are_respected(enabled, start_deg):
     u = np.array([math.radians(start_deg), 0.0, 0.0])
     n_p, n_c = 20, 8
     ref = np.column_stack([np.full(n_p, 0.3), np.full(n_p, 5.0)])   # far away: wants a lot
-    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-6, eps_rel=1e-6, max_iter=20000))
+    qp = Q.MpcQp(S.QpSettings(eps_abs=1e-6, eps_rel=1e-6, max_iter=20000))
     b = _bounds(enabled)
     sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([50.0, 40.0]),
                    np.array([1.0, 1.0, 1e-6]), 1e3, b)
@@ -148,7 +149,7 @@ def test_soft_bounds_use_the_slack():
     z, u, Ak, Bk, dk = _model(6)
     n_p, n_c = 12, 6
     ref = np.column_stack([np.zeros(n_p), np.full(n_p, z[StateIdx.Y] + 2.0)])  # 2 m off
-    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
+    qp = Q.MpcQp(S.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
     sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([1.0, 1.0]),
                    np.array([1.0, 1.0, 1.0]), 1.0, _bounds(band=(math.radians(8), 0.5)))
     assert sol.ok
@@ -160,7 +161,7 @@ def test_hard_state_bounds_hold_and_infeasibility_is_reported():
     z, u, Ak, Bk, dk = _model(7)
     n_p, n_c = 12, 6
     ref = np.column_stack([np.zeros(n_p), np.full(n_p, z[StateIdx.Y] + 1.0)])
-    qp = Q.MpcQp(Q.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
+    qp = Q.MpcQp(S.QpSettings(eps_abs=1e-7, eps_rel=1e-7, max_iter=50000))
     b = _bounds(state_bounds=True)
     b = Q.QpBounds(b.du_max, b.u_max, b.enabled, vy_max=0.35, r_max=0.25, band_phi=1.0,
                    band_y=5.0, state_bounds=True)
@@ -191,12 +192,69 @@ def test_one_warm_started_instance_per_horizon_pair():
     ref = np.zeros((30, 2))
     qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args)
     inst = qp.instance(12, 6)
-    solver = inst.solver
+    solver = qp.solver.instances[(12, 6)]
     qp.solve(Ak, Bk, dk, z, u, ref[:20], 20, 7, *args)
     sol = qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args)
-    assert qp.instance(12, 6) is inst and inst.solver is solver
-    assert set(qp.instances) == {(12, 6), (20, 7)}
+    assert qp.instance(12, 6) is inst and qp.solver.instances[(12, 6)] is solver
+    assert set(qp.instances) == {(12, 6), (20, 7)} == set(qp.solver.instances)
     assert inst.uses == 2
     # the second identical solve starts from the previous solution: few iterations
     sol2 = qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args, warm_du_scaled=sol.du_scaled)
     assert sol2.ok and sol2.iterations <= sol.iterations
+
+
+def test_osqp_status_through_its_enum_and_one_trust_rule():
+    import osqp
+
+    assert S.osqp_status(osqp.SolverStatus.OSQP_SOLVED.value) is S.QpStatus.SOLVED
+    assert S.osqp_status(osqp.SolverStatus.OSQP_MAX_ITER_REACHED.value) is \
+        S.QpStatus.MAX_ITER_REACHED
+    assert S.osqp_status(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE.value) is \
+        S.QpStatus.PRIMAL_INFEASIBLE
+    x = np.zeros(3)
+    assert S.trusted(S.QpStatus.SOLVED, x, False)
+    assert not S.trusted(S.QpStatus.SOLVED_INACCURATE, x, False)
+    assert S.trusted(S.QpStatus.SOLVED_INACCURATE, x, True)
+    assert not S.trusted(S.QpStatus.SOLVED, np.array([0.0, np.nan]), True)
+    assert not S.trusted(S.QpStatus.MAX_ITER_REACHED, x, True)
+
+
+class _RecordingSolver:
+    """A solver behind the seam that answers with OSQP and keeps what it was handed."""
+
+    def __init__(self):
+        self.inner = S.OsqpSolver(S.QpSettings())
+        self.prepared, self.seen = [], []
+
+    def prepare(self, pattern):
+        self.prepared.append(pattern.key)
+        self.inner.prepare(pattern)
+
+    def solve(self, qp, warm_x):
+        self.seen.append(qp)
+        return self.inner.solve(qp, warm_x)
+
+
+def test_injected_solver_gets_the_condensed_qp_and_gives_the_same_answer():
+    z, u, Ak, Bk, dk = _model(3)
+    args = (np.array([50.0, 40.0]), np.array([1e4, 1e4, 1e-4]), 1e3, _bounds())
+    ref = np.zeros((12, 2))
+    rec = _RecordingSolver()
+    a = Q.MpcQp(solver=rec).solve(Ak, Bk, dk, z, u, ref, 12, 6, *args)
+    b = Q.MpcQp().solve(Ak, Bk, dk, z, u, ref, 12, 6, *args)
+    assert rec.prepared == [(12, 6)]
+    qp = rec.seen[0]
+    assert qp.H.shape == (18, 18) and qp.A.shape == (qp.pattern.m, 19)
+    np.testing.assert_allclose(qp.H, qp.H.T, rtol=1e-12, atol=1e-12)  # upper triangle read
+    assert qp.slack_hessian == 2e3
+    assert a.ok and b.ok and np.array_equal(a.u, b.u) and a.code is S.QpStatus.SOLVED
+
+
+def test_unknown_solver_or_model_is_a_clear_error():
+    from fourws_mpc.core.model import ModelParams
+    from fourws_mpc.core.prediction_model import make_prediction_model
+
+    with pytest.raises(ValueError, match="qp_solver.*known: osqp"):
+        S.make_qp_solver("cplex", S.QpSettings())
+    with pytest.raises(ValueError, match="prediction_model.*single_track"):
+        make_prediction_model("bicycle9", ModelParams())

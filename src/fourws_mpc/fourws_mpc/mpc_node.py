@@ -43,7 +43,14 @@ from fourws_common.latest_input import LatestInput
 from fourws_common.node_main import run_node
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
-from fourws_mpc.core.controller import MpcConfig, MpcController, VehicleSample
+from fourws_common.topics import (
+    MPC_COMMAND,
+    MPC_DIAGNOSTICS,
+    REFERENCE_TRAJECTORY,
+    VEHICLE_STATE,
+)
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
@@ -62,22 +69,22 @@ class MpcNode(Node):
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
-        self.latest = LatestInput(self, self.health.guard("/vehicle/state", self._on_state),
+        self.latest = LatestInput(self, self.health.guard(VEHICLE_STATE.name, self._on_state),
                                   self.health)
         self.inputs = ParamBinding(self, InputConfig,
                                    on_change=lambda c: self.latest.set_sync(c.sync))
         self.latest.set_sync(self.inputs.config.sync)
-        self.pub_cmd = self.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+        self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.name, CONTROL_QOS)
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
         self._cmd_msg, self._diag_msg = MpcCommand(), MpcDiagnostics()
-        self.pub_diag = self.create_publisher(MpcDiagnostics, "/control/mpc_diagnostics",
+        self.pub_diag = self.create_publisher(MpcDiagnostics, MPC_DIAGNOSTICS.name,
                                               CONTROL_QOS)
-        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
-                                 self.health.guard("/reference/trajectory", self._on_ref),
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+                                 self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state",
-                                 self.health.guard("/vehicle/state", self.latest.offer),
+        self.create_subscription(VehicleState, VEHICLE_STATE.name,
+                                 self.health.guard(VEHICLE_STATE.name, self.latest.offer),
                                  LATEST_QOS)
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 

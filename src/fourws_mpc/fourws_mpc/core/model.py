@@ -14,7 +14,7 @@ hence the factor 2) and linear tyres::
     Ẏ  = vx sin φ + vy cos φ
     Ẋ  = vx cos φ − vy sin φ
 
-Deviations from the printed paper (see ``paper-notes.md``):
+Deviations from the printed paper (see ``docs/mpc.md``, "Deviations from the paper"):
 
 * eq. (1) writes Mz inside ``2/Iz [...]``; the yaw moment enters as Mz/Iz (implemented).
 * The printed B_t drops the factor 2 and the sign of the rear-steer yaw term; the Jacobians
@@ -73,7 +73,7 @@ class ModelParams:
     """Parameters of eq. (1) in SI units; C_cf, C_cr, C_lf, C_lr are per tyre."""
 
     mass_kg: float = 750.0
-    yaw_inertia_kgm2: float = 750.0
+    yaw_inertia_kg_m2: float = 750.0
     a_m: float = 1.10
     b_m: float = 1.25
     c_cf: float = 28000.0
@@ -98,8 +98,8 @@ def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
         p.c_lf * p.slip_front + p.c_lr * p.slip_rear - p.c_cf * af * df - p.c_cr * ar * dr
     ) + vy * r
     out[StateIdx.PHI] = r
-    out[StateIdx.R] = 2.0 / p.yaw_inertia_kgm2 * (p.a_m * p.c_cf * af - p.b_m * p.c_cr * ar) + (
-        mz / p.yaw_inertia_kgm2
+    out[StateIdx.R] = 2.0 / p.yaw_inertia_kg_m2 * (p.a_m * p.c_cf * af - p.b_m * p.c_cr * ar) + (
+        mz / p.yaw_inertia_kg_m2
     )
     s, c = np.sin(phi), np.cos(phi)
     out[StateIdx.Y] = vx * s + vy * c
@@ -118,7 +118,7 @@ def jacobians(
     S, I = StateIdx, InputIdx
     vy, vx, phi, r = zeta[S.VY], zeta[S.VX], zeta[S.PHI], zeta[S.R]
     df, dr = u[I.DF], u[I.DR]
-    m, iz, a, b = p.mass_kg, p.yaw_inertia_kgm2, p.a_m, p.b_m
+    m, iz, a, b = p.mass_kg, p.yaw_inertia_kg_m2, p.a_m, p.b_m
     cf, cr = p.c_cf, p.c_cr
     floored = vx < p.min_speed_mps
     vxs = p.min_speed_mps if floored else vx

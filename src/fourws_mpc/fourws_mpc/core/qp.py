@@ -16,7 +16,7 @@ vy and r carry the hard bounds. The matrix powers Ã^0..Ã^Np are built by doubl
 Toeplitz array, Γ by a cumulative sum; no Python loop runs over horizon steps.
 
 Cost, eq. (16)-(19), with the increments indexed k..k+Nc−1 (the printed eq. (16) sums from
-i = 1 to Nc−1, one increment short; paper-notes)::
+i = 1 to Nc−1, one increment short; docs/mpc.md, "Deviations from the paper")::
 
     J = Σ_{i=1..Np} ‖y_i − y_ref,i‖²_Q + Σ_{j=0..Nc−1} ‖Δu_j‖²_R + ρ ε²
 
@@ -35,10 +35,10 @@ Constraints, eq. (20) and section 3.1.5 (rows of the OSQP matrix, in this order)
     |φ_i − φ_ref,i| ≤ b_φ (1 + ε),  |Y_i − Y_ref,i| ≤ b_Y (1 + ε)     soft, eq. (20)
 
 Disabled inputs keep their columns and are pinned by equal bounds, so every controller shares
-one sparsity pattern per (Np, Nc). One OSQP instance per (Np, Nc) ever used is kept in a dict;
-each step updates P, q, A, l, u in place (fixed pattern, explicit zeros kept) and warm-starts
-from the shifted previous plan. Only OSQP status "solved" (and "solved inaccurate" when
-``accept_inaccurate``) is trusted.
+one sparsity pattern per (Np, Nc) (:class:`QpLayout`, built once per pair and kept). Each step
+fills the layout's buffers into a :class:`~fourws_mpc.core.qp_solver.CondensedQp` and hands it
+to the injected solver (the solver seam, ``qp_solver``), warm-started from the shifted previous
+plan; only a solution the solver calls optimal is used (``qp_solver.trusted``).
 """
 
 from __future__ import annotations
@@ -46,10 +46,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import osqp
-import scipy.sparse as sp
 
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
+from fourws_mpc.core.qp_solver import (
+    CondensedQp,
+    OsqpSolver,
+    QpPattern,
+    QpSettings,
+    QpSolver,
+    QpStatus,
+)
 
 N_AUG = N_STATE + N_INPUT
 _EYE_U = np.eye(N_INPUT)
@@ -58,7 +64,6 @@ _ZERO_U = np.zeros(N_INPUT)
 OUT_ROWS = (StateIdx.PHI, StateIdx.Y, StateIdx.VY, StateIdx.R)
 N_OUT = len(OUT_ROWS)
 _INF = np.inf
-OSQP_INFTY = float(osqp.constant("OSQP_INFTY"))  # OSQP's infinity (1e30)
 
 
 def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
@@ -76,22 +81,6 @@ def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
 def _clip(x: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
     """``np.clip`` for lo ≤ hi without its dispatch overhead (~8 µs a call on small arrays)."""
     return np.minimum(np.maximum(x, lo), hi)
-
-
-def _invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, Px: np.ndarray,
-                  Ax: np.ndarray) -> str:
-    """Why OSQP's data validation would reject this QP data ("" if it would not): a
-    non-finite q, P or A entry, a NaN or +inf lower / -inf upper bound, or l > u."""
-    for name, v in (("q", q), ("P", Px), ("A", Ax)):
-        if not np.all(np.isfinite(v)):
-            return f"non-finite {name}"
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo == _INF) or \
-            np.any(hi == -_INF):
-        return "bad bounds"
-    # as OSQP sees them: its wrapper clips the bounds to ±OSQP_INFTY first
-    if np.any(np.maximum(lo, -OSQP_INFTY) > np.minimum(hi, OSQP_INFTY)):
-        return "l > u"
-    return ""
 
 
 def output_matrix(rows: tuple[int, ...] = OUT_ROWS) -> np.ndarray:
@@ -139,18 +128,6 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
 
 
 @dataclass(frozen=True)
-class QpSettings:
-    """OSQP settings shared by every (Np, Nc) instance."""
-
-    eps_abs: float = 1e-4
-    eps_rel: float = 1e-4
-    max_iter: int = 4000
-    polishing: bool = False
-    accept_inaccurate: bool = False
-    check_termination: int = 5
-
-
-@dataclass(frozen=True)
 class QpBounds:
     """Bounds of eq. (20) in SI units; ``enabled[c]`` False pins input c to zero."""
 
@@ -167,7 +144,9 @@ class QpBounds:
 
 @dataclass
 class QpSolution:
-    """Result of one QP solve; ``du``/``u`` are (Nc, 3) SI plans, valid only when ``ok``."""
+    """Result of one QP solve; ``du``/``u`` are (Nc, 3) SI plans, valid only when ``ok``.
+    ``status`` is the solver's own text (recorded in the diagnostics), ``code`` its
+    :class:`~fourws_mpc.core.qp_solver.QpStatus`."""
 
     ok: bool
     status: str
@@ -176,39 +155,30 @@ class QpSolution:
     u: np.ndarray
     slack: float
     du_scaled: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    code: QpStatus = QpStatus.UNSOLVED
 
 
-class _Instance:
-    """One OSQP problem with the fixed sparsity pattern of a (Np, Nc) pair."""
+class QpLayout:
+    """The fixed structure of the QP of one (Np, Nc) pair: sparsity pattern, row blocks,
+    constant parts of A, and the buffers each step refills."""
 
-    def __init__(self, n_p: int, n_c: int, settings: QpSettings) -> None:
+    def __init__(self, n_p: int, n_c: int) -> None:
         self.n_p, self.n_c = n_p, n_c
         nu = N_INPUT
         nz = nu * n_c + 1
         self.nz = nz
         # P pattern: full upper triangle of the ΔŨ block, plus the slack diagonal
         iu, ju = np.triu_indices(nu * n_c)
-        p_rows = np.concatenate([iu, [nz - 1]])
-        p_cols = np.concatenate([ju, [nz - 1]])
-        self.p_rows, self.p_cols, P = _csc_pattern(p_rows, p_cols, (nz, nz))
-        # A pattern
+        p_rows, p_cols = _csc_order(np.concatenate([iu, [nz - 1]]),
+                                    np.concatenate([ju, [nz - 1]]))
         mask = self._a_mask()
-        ar, ac = np.nonzero(mask)
-        self.a_rows, self.a_cols, A = _csc_pattern(ar, ac, mask.shape)
+        a_rows, a_cols = _csc_order(*np.nonzero(mask))
         self.m = mask.shape[0]
-        self.solver = osqp.OSQP()
-        self.solver.setup(
-            P, np.zeros(nz), A, -np.ones(self.m), np.ones(self.m),
-            eps_abs=settings.eps_abs, eps_rel=settings.eps_rel, max_iter=settings.max_iter,
-            polishing=settings.polishing, warm_starting=True, verbose=False,
-            check_termination=settings.check_termination,
-        )
-        self.last_x: np.ndarray | None = None
+        self.pattern = QpPattern((n_p, n_c), nz, self.m, p_rows, p_cols, a_rows, a_cols)
         self.uses = 0
         # constant parts of the dense constraint matrix (rows as in _a_mask)
         ncol = nu * n_c
         self.ncol = ncol
-        self.p_gather = (self.p_rows[:-1], self.p_cols[:-1])
         self.cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(nu))
         self.A = np.zeros((self.m, ncol + 1))
         self.A[:ncol, :ncol] = np.eye(ncol)
@@ -255,30 +225,30 @@ class _Instance:
         return np.vstack([top, eps_row, ub, hard, soft, soft])
 
 
-def _csc_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]
-                 ) -> tuple[np.ndarray, np.ndarray, sp.csc_matrix]:
-    """Rows/cols of a pattern in CSC storage order and a CSC matrix of ones with it."""
+def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows/cols of a pattern sorted into CSC storage order (column-major)."""
     order = np.lexsort((rows, cols))
-    r, c = rows[order], cols[order]
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=shape[1]))])
-    M = sp.csc_matrix((np.ones(len(r)), r.astype(np.int64), indptr), shape=shape)
-    return r, c, M
+    return rows[order], cols[order]
 
 
 class MpcQp:
-    """Builds and solves the MPC QP; keeps one warm-started OSQP instance per (Np, Nc)."""
+    """Builds the MPC QP of each step and solves it with the injected solver; keeps one
+    :class:`QpLayout` per (Np, Nc) ever used."""
 
-    def __init__(self, settings: QpSettings | None = None) -> None:
+    def __init__(self, settings: QpSettings | None = None, solver: QpSolver | None = None
+                 ) -> None:
         self.settings = settings if settings is not None else QpSettings()
-        self.instances: dict[tuple[int, int], _Instance] = {}
+        self.solver: QpSolver = solver if solver is not None else OsqpSolver(self.settings)
+        self.instances: dict[tuple[int, int], QpLayout] = {}
         self._C = output_matrix()
 
-    def instance(self, n_p: int, n_c: int) -> _Instance:
-        """The OSQP instance of (Np, Nc), created on first use and kept."""
+    def instance(self, n_p: int, n_c: int) -> QpLayout:
+        """The layout of (Np, Nc), created (and prepared in the solver) on first use."""
         key = (int(n_p), int(n_c))
         inst = self.instances.get(key)
         if inst is None:
-            inst = _Instance(key[0], key[1], self.settings)
+            inst = QpLayout(key[0], key[1])
+            self.solver.prepare(inst.pattern)
             self.instances[key] = inst
         return inst
 
@@ -316,9 +286,6 @@ class MpcQp:
         H[inst.diag] += 2.0 * r_s
         qvec = np.concatenate([2.0 * th_out.T @ (w * e_free), [0.0]])
 
-        Px = np.empty(len(inst.p_rows))
-        Px[:-1] = H[inst.p_gather]
-        Px[-1] = 2.0 * rho
         A = inst.A
         ncol = inst.ncol
         A[inst.r_ub, :ncol] = inst.cum * D[None, :]
@@ -327,7 +294,6 @@ class MpcQp:
         A[inst.r_soft_hi, ncol] = -band
         A[inst.r_soft_lo, :ncol] = th_out
         A[inst.r_soft_lo, ncol] = band
-        Ax = A[inst.a_rows, inst.a_cols]
 
         u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
         hard_free = free[:, 2:].reshape(-1)
@@ -339,7 +305,7 @@ class MpcQp:
                 hard_lim[:2 * (bounds.state_bounds_from_step - 1)] = _INF
         else:
             hard_lim = inst.inf2
-        # rows in the order of _Instance._a_mask: Δũ box, ε, u bounds, hard, soft hi, soft lo
+        # rows in the order of QpLayout._a_mask: Δũ box, ε, u bounds, hard, soft hi, soft lo
         lo, hi = inst.lo, inst.hi
         r_u, r_h, r_sh, r_sl = inst.r_ub, inst.r_hard, inst.r_soft_hi, inst.r_soft_lo
         lo[:ncol], hi[:ncol] = -en, en
@@ -351,33 +317,20 @@ class MpcQp:
         # a u(k−1) outside its bound (never produced here) must not make l > u
         np.minimum(lo, hi, out=lo)
 
-        s = inst.solver
-        bad = _invalid_data(qvec, lo, hi, Px, Ax)
-        if bad:
-            # OSQP would refuse the update (its wrapper ignores that) and solve the previous
-            # step's data: never trust that; the step is a failed solve.
-            empty = np.zeros((n_c, nu))
-            return QpSolution(False, f"invalid data: {bad}", 0, empty, empty, 0.0,
-                              np.zeros((n_c, nu)))
-        s.update(q=qvec, l=lo, u=hi, Px=Px, Ax=Ax)
+        warm = None
         if warm_du_scaled is not None:
-            x0 = np.concatenate([_clip(warm_du_scaled.reshape(-1), -en, en), [0.0]])
-            s.warm_start(x=x0)
-        res = s.solve(raise_error=False)
+            warm = np.concatenate([_clip(warm_du_scaled.reshape(-1), -en, en), [0.0]])
+        res = self.solver.solve(CondensedQp(inst.pattern, H, 2.0 * rho, qvec, A, lo, hi),
+                                warm)
         inst.uses += 1
-        status = str(res.info.status)
         x = res.x
-        trusted = status == "solved" or (self.settings.accept_inaccurate
-                                         and status == "solved inaccurate")
-        ok = bool(trusted and x is not None and np.all(np.isfinite(x)))
-        if not ok:
-            s.warm_start(x=np.zeros(inst.nz), y=np.zeros(inst.m))
+        if x is None:
             empty = np.zeros((n_c, nu))
-            return QpSolution(False, status, int(res.info.iter), empty, empty, 0.0,
-                              np.zeros((n_c, nu)))
+            return QpSolution(False, res.detail, res.iterations, empty, empty, 0.0,
+                              np.zeros((n_c, nu)), res.status)
         dus = _clip(x[:ncol], -en, en).reshape(n_c, nu)
         du = dus * bounds.du_max[None, :]
         u = _clip(u_prev[None, :] + np.cumsum(du, axis=0),
                   -bounds.u_max[None, :], bounds.u_max[None, :])
-        inst.last_x = x
-        return QpSolution(True, status, int(res.info.iter), du, u, max(float(x[-1]), 0.0), dus)
+        return QpSolution(True, res.detail, res.iterations, du, u, max(float(x[-1]), 0.0),
+                          dus, res.status)

@@ -1,0 +1,225 @@
+"""Every parameter of the MPC of section 3, as one frozen dataclass (``mpc.yaml``'s keys).
+
+The values live in ``fourws_mpc/config/mpc.yaml`` (a unit test checks the file and the
+defaults here agree); the controller presets of ``fourws_bringup/config/controllers/`` override
+what differs. Degrees only where the key says ``_deg``; SI otherwise. The vehicle constants use
+the plant's names (``fourws_sim/config/vehicle.yaml``); a unit test keeps their nominal values
+equal to the plant's, so a model mismatch is always an explicit override.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fourws_common.params import from_mapping, param
+from fourws_mpc.core.apcha import ApchaParams
+from fourws_mpc.core.fuzzy_weights import FuzzySpec
+from fourws_mpc.core.model import ModelParams
+
+
+@dataclass(frozen=True)
+class MpcConfig:
+    """Every parameter of the MPC (flat keys of ``fourws_mpc/config/mpc.yaml``)."""
+
+    controller: str = param("improved", "controller preset name (reported in diagnostics)")
+    use_rear_steer: bool = param(True, "rear steer is an input (else δr ≡ 0)")
+    use_dyc: bool = param(True, "direct yaw moment is an input (else Mz ≡ 0)")
+    weights_mode: str = param("fuzzy", "fixed weights or fuzzy adaptive weights (sec. 3.2)",
+                              choices=("fixed", "fuzzy"))
+    horizons_mode: str = param("apcha", "fixed horizons or APCHA (eq. 7-15)",
+                               choices=("fixed", "apcha"))
+    prediction_frame: str = param("path", "frame of the prediction: path-aligned at the "
+                                  "nearest point, or the map frame", choices=("path", "global"))
+    # fixed weights (section 4)
+    q_phi: float = param(1.0, "fixed output weight Q_φ", lo=0.0, hi=1e9)
+    q_y: float = param(10.0, "fixed output weight Q_Y", lo=0.0, hi=1e9)
+    r_ddelta: float = param(1.0, "fixed steer-increment weight R_Δδ", lo=1e-9, hi=1e9)
+    r_dmz: float = param(1.0, "fixed yaw-moment-increment weight R_ΔMz", lo=1e-9, hi=1e9)
+    # fuzzy maxima, eq. (23)
+    q_y_max: float = param(8000.0, "fuzzy maximum Q_Y,max", lo=0.0, hi=1e9)
+    q_phi_max: float = param(5000.0, "fuzzy maximum Q_φ,max", lo=0.0, hi=1e9)
+    r_ddelta_max: float = param(80000.0, "fuzzy maximum R_Δδ,max", lo=1e-9, hi=1e9)
+    r_dmz_max: float = param(60000.0, "fuzzy maximum R_ΔMz,max", lo=1e-9, hi=1e9)
+    fuzzy_e_y_range_m: float = param(3.0, "fuzzy universe of e_Y is ±this", lo=0.01, hi=100.0,
+                                     unit="m")
+    fuzzy_e_phi_range_deg: float = param(8.0, "fuzzy universe of e_φ is ±this", lo=0.01,
+                                         hi=180.0, unit="deg")
+    fuzzy_grid_y: int = param(121, "precomputed response-surface grid points along e_Y",
+                              lo=5, hi=2001)
+    fuzzy_grid_phi: int = param(161, "precomputed response-surface grid points along e_φ",
+                                lo=5, hi=2001)
+    fuzzy_out_points: int = param(201, "samples of the output universe [0, 1]", lo=11,
+                                  hi=10001)
+    # cost scaling (one for all controllers)
+    scale_y_m: float = param(0.0059, "characteristic lateral error s_Y", lo=1e-6, hi=100.0,
+                             unit="m")
+    scale_phi_deg: float = param(0.30, "characteristic heading error s_φ", lo=1e-6, hi=180.0,
+                                 unit="deg")
+    scale_dsteer_front_deg: float = param(0.8, "characteristic front-steer increment s_Δδf",
+                                          lo=1e-6, hi=90.0, unit="deg")
+    scale_dsteer_rear_deg: float = param(1.04, "characteristic rear-steer increment s_Δδr",
+                                         lo=1e-6, hi=90.0, unit="deg")
+    scale_dmz_nm: float = param(300.0, "characteristic yaw-moment increment s_ΔMz", lo=1e-6,
+                                hi=1e6, unit="N*m")
+    rho: float = param(1000.0, "slack weight ρ of the soft output bounds", lo=0.0, hi=1e12)
+    # horizons
+    np_baseline: int = param(12, "prediction horizon N_p (fixed mode; APCHA start)", lo=1,
+                             hi=200)
+    nc_baseline: int = param(6, "control horizon N_c (fixed mode; APCHA start)", lo=1, hi=200)
+    np_min: int = param(10, "APCHA N_p,min", lo=1, hi=200)
+    np_max: int = param(30, "APCHA N_p,max", lo=1, hi=200)
+    np_step: int = param(2, "APCHA ΔN_p", lo=0, hi=100)
+    nc_min: int = param(3, "APCHA N_c,min", lo=1, hi=200)
+    nc_max: int = param(10, "APCHA N_c,max", lo=1, hi=200)
+    nc_step: int = param(1, "APCHA ΔN_c", lo=0, hi=100)
+    apcha_eps1: float = param(0.2, "APCHA ε1 (threshold on e_s)", lo=0.0, hi=100.0)
+    apcha_eps2: float = param(0.5, "APCHA ε2 (threshold on k_e)", lo=0.0, hi=1e6, unit="1/s")
+    apcha_eps3: float = param(0.3, "APCHA ε3 (threshold on k_u)", lo=0.0, hi=100.0)
+    apcha_lambda: float = param(0.5, "APCHA λ, weight of the heading error in e_s",
+                                lo=1e-6, hi=0.999999)
+    apcha_e_y_max_m: float = param(0.5, "e_Y,max of eq. (7)", lo=1e-6, hi=100.0, unit="m")
+    apcha_e_phi_max_deg: float = param(8.0, "e_φ,max of eq. (7)", lo=1e-6, hi=180.0,
+                                       unit="deg")
+    apcha_np_rate_limit: bool = param(True, "N_p moves by at most ΔN_p per period")
+    apcha_nc_base: str = param("previous", "N_c^i of eq. (14): the previous N_c or ⌊N_p^t/3⌋",
+                               choices=("previous", "np_third"))
+    # constraints, eq. (20) and section 3.1.5
+    max_steer_front_deg: float = param(30.0, "|δf| bound", lo=0.0, hi=90.0, unit="deg")
+    max_steer_rear_deg: float = param(10.0, "|δr| bound", lo=0.0, hi=90.0, unit="deg")
+    max_dsteer_front_deg: float = param(0.8, "|Δδf| per step", lo=1e-6, hi=90.0, unit="deg")
+    max_dsteer_rear_deg: float = param(0.6, "|Δδr| per step", lo=1e-6, hi=90.0, unit="deg")
+    max_yaw_moment_nm: float = param(1500.0, "|Mz| bound", lo=0.0, hi=1e6, unit="N*m")
+    max_dyaw_moment_nm: float = param(300.0, "|ΔMz| per step", lo=1e-6, hi=1e6, unit="N*m")
+    state_bounds: bool = param(True, "impose the hard sideslip and yaw-rate bounds")
+    state_bounds_from_step: int = param(3, "first prediction step i with the hard bounds "
+                                        "(earlier steps are fixed by the current state)",
+                                        lo=1, hi=200)
+    max_sideslip_deg: float = param(6.0, "hard |β| bound, as |vy| ≤ vx tan β_max", lo=0.01,
+                                    hi=90.0, unit="deg")
+    yaw_rate_mu_factor: float = param(0.85, "hard |r| ≤ factor μ g / vx", lo=0.01, hi=10.0)
+    mu_default: float = param(1.0, "adhesion used for the yaw-rate bound when the state "
+                              "carries none", lo=0.01, hi=3.0)
+    soft_band_y_m: float = param(0.5, "soft bound |Y − Y_ref| ≤ band (1 + ε)", lo=1e-6,
+                                 hi=100.0, unit="m")
+    soft_band_phi_deg: float = param(8.0, "soft bound |φ − φ_ref| ≤ band (1 + ε)", lo=1e-6,
+                                     hi=180.0, unit="deg")
+    # prediction model, eq. (1)
+    prediction_model: str = param("single_track", "prediction model behind the model seam "
+                                  "(prediction_model.PREDICTION_MODELS)",
+                                  choices=("single_track",))
+    mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
+    yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", lo=1.0, hi=1e6, unit="kg*m^2")
+    cg_to_front_axle_m: float = param(1.10, "CG to front axle a", lo=0.01, hi=10.0, unit="m")
+    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b", lo=0.01, hi=10.0, unit="m")
+    cornering_stiffness_front_n_per_rad: float = param(
+        27994.0, "per-tyre front cornering stiffness C_cf", lo=1.0, hi=1e7, unit="N/rad")
+    cornering_stiffness_rear_n_per_rad: float = param(
+        29999.0, "per-tyre rear cornering stiffness C_cr", lo=1.0, hi=1e7, unit="N/rad")
+    longitudinal_stiffness_front_n: float = param(50000.0, "per-tyre C_lf", lo=0.0, hi=1e7,
+                                                  unit="N")
+    longitudinal_stiffness_rear_n: float = param(50000.0, "per-tyre C_lr", lo=0.0, hi=1e7,
+                                                 unit="N")
+    slip_ratio_front: float = param(0.0, "S_f of eq. (1)", lo=-1.0, hi=1.0)
+    slip_ratio_rear: float = param(0.0, "S_r of eq. (1)", lo=-1.0, hi=1.0)
+    min_speed_mps: float = param(1.0, "vx floor in the slip angles", lo=0.01, hi=50.0,
+                                 unit="m/s")
+    dt_s: float = param(0.01, "control period and prediction step T", lo=1e-4, hi=1.0,
+                        unit="s")
+    # solver
+    qp_solver: str = param("osqp", "QP solver behind the solver seam (qp_solver.QP_SOLVERS)",
+                           choices=("osqp",))
+    osqp_eps_abs: float = param(1e-4, "OSQP absolute tolerance", lo=1e-10, hi=1.0)
+    osqp_eps_rel: float = param(1e-4, "OSQP relative tolerance", lo=1e-10, hi=1.0)
+    osqp_max_iter: int = param(4000, "OSQP iteration limit", lo=10, hi=1000000)
+    osqp_polishing: bool = param(False, "OSQP solution polishing")
+    osqp_check_termination: int = param(5, "OSQP checks convergence every this many "
+                                        "iterations", lo=1, hi=1000)
+    osqp_accept_inaccurate: bool = param(False, "trust OSQP status 'solved inaccurate'")
+    osqp_prebuild: bool = param(True, "set up the OSQP instance of every reachable (N_p, N_c) "
+                                "at start-up (no set-up cost inside the control loop)")
+    ref_search_back: int = param(50, "nearest-point window behind the last index", lo=1,
+                                 hi=1000000, unit="samples")
+    ref_search_ahead: int = param(400, "nearest-point window ahead of the last index", lo=2,
+                                  hi=1000000, unit="samples")
+
+    def __post_init__(self) -> None:
+        if self.np_min > self.np_max:
+            raise ValueError(f"np_min, np_max: need np_min <= np_max, got {self.np_min}, "
+                             f"{self.np_max}")
+        if self.nc_min > self.nc_max:
+            raise ValueError(f"nc_min, nc_max: need nc_min <= nc_max, got {self.nc_min}, "
+                             f"{self.nc_max}")
+        if self.nc_baseline > self.np_baseline:
+            raise ValueError("nc_baseline, np_baseline: need N_c <= N_p, got "
+                             f"{self.nc_baseline} > {self.np_baseline}")
+        if self.horizons_mode == "apcha":
+            if not self.np_min <= self.np_baseline <= self.np_max:
+                raise ValueError("np_baseline: must lie in [np_min, np_max] with APCHA")
+            if not self.nc_min <= self.nc_baseline <= self.nc_max:
+                raise ValueError("nc_baseline: must lie in [nc_min, nc_max] with APCHA")
+            if self.np_min // 3 < 1:
+                raise ValueError("np_min: ⌊np_min/3⌋ must be >= 1 for the N_c clamp of eq. (15)")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], *, strict: bool = True) -> MpcConfig:
+        """Build and validate from a flat mapping (e.g. a merged ROS params file)."""
+        return from_mapping(cls, values, strict=strict)
+
+    def model_params(self) -> ModelParams:
+        """Parameters of eq. (1) in SI."""
+        return ModelParams(
+            mass_kg=self.mass_kg, yaw_inertia_kg_m2=self.yaw_inertia_kg_m2,
+            a_m=self.cg_to_front_axle_m, b_m=self.cg_to_rear_axle_m,
+            c_cf=self.cornering_stiffness_front_n_per_rad,
+            c_cr=self.cornering_stiffness_rear_n_per_rad,
+            c_lf=self.longitudinal_stiffness_front_n, c_lr=self.longitudinal_stiffness_rear_n,
+            slip_front=self.slip_ratio_front, slip_rear=self.slip_ratio_rear,
+            min_speed_mps=self.min_speed_mps)
+
+    @property
+    def du_max(self) -> np.ndarray:
+        """|Δu| bounds per step (rad, rad, N·m)."""
+        return np.array([math.radians(self.max_dsteer_front_deg),
+                         math.radians(self.max_dsteer_rear_deg), self.max_dyaw_moment_nm])
+
+    @property
+    def u_max(self) -> np.ndarray:
+        """|u| bounds (rad, rad, N·m)."""
+        return np.array([math.radians(self.max_steer_front_deg),
+                         math.radians(self.max_steer_rear_deg), self.max_yaw_moment_nm])
+
+    @property
+    def enabled(self) -> np.ndarray:
+        """Which inputs are free: δf always, δr with rear steer, Mz with DYC."""
+        return np.array([True, self.use_rear_steer, self.use_dyc])
+
+    def apcha_params(self) -> ApchaParams:
+        """APCHA constants in SI."""
+        return ApchaParams(
+            np_min=self.np_min, np_max=self.np_max, np_step=self.np_step,
+            nc_min=self.nc_min, nc_max=self.nc_max, nc_step=self.nc_step,
+            eps1=self.apcha_eps1, eps2=self.apcha_eps2, eps3=self.apcha_eps3,
+            lam=self.apcha_lambda, e_y_max=self.apcha_e_y_max_m,
+            e_phi_max=math.radians(self.apcha_e_phi_max_deg),
+            du_max=tuple(float(v) for v in self.du_max), dt_s=self.dt_s,
+            np_rate_limit=self.apcha_np_rate_limit, nc_base=self.apcha_nc_base)
+
+    def horizon_pairs(self) -> list[tuple[int, int]]:
+        """Every (N_p, N_c) this configuration can use (baseline; all pairs of eq. (15))."""
+        pairs = {(self.np_baseline, self.nc_baseline)}
+        if self.horizons_mode == "apcha":
+            for n_p in range(self.np_min, self.np_max + 1):
+                lo = max(n_p // 3, min(self.nc_min, n_p // 2))
+                hi = max(n_p // 3, min(self.nc_max, n_p // 2))
+                pairs.update((n_p, n_c) for n_c in range(lo, hi + 1))
+        return sorted(pairs)
+
+    def fuzzy_spec(self) -> FuzzySpec:
+        """Universes and grid of the fuzzy scheduler."""
+        return FuzzySpec(self.fuzzy_e_y_range_m, self.fuzzy_e_phi_range_deg,
+                         self.fuzzy_grid_y, self.fuzzy_grid_phi, self.fuzzy_out_points)

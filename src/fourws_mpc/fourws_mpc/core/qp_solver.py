@@ -1,0 +1,231 @@
+"""The solver seam: a condensed QP, a solver protocol, a status enum, and OSQP behind them.
+
+The MPC (``qp.MpcQp``) condenses eq. (16)-(20) into one dense QP in z = [ΔŨ; ε]::
+
+    minimise   ½ zᵀ P z + qᵀ z,   P = blockdiag(H, 2ρ)
+    subject to lo ≤ A z ≤ hi
+
+(:class:`CondensedQp`) and hands it to a :class:`QpSolver`. A solver returns a
+:class:`QpResult` with a solver-independent :class:`QpStatus`; only a solution the solver
+calls optimal (``SOLVED``, and ``SOLVED_INACCURATE`` when ``accept_inaccurate``) with a finite
+z is trusted (:func:`trusted`): anything else is a failed solve, and the MPC falls back.
+Data a solver's validation would refuse (non-finite entries, lo > hi) are never handed to it:
+:func:`invalid_data` says why, and the step is a failed solve with status ``INVALID_DATA``.
+
+Solvers are chosen by name (:data:`QP_SOLVERS`, parameter ``qp_solver``). :class:`OsqpSolver`
+keeps one warm-started OSQP instance per sparsity pattern (one per (N_p, N_c)) and updates
+P, q, A, l, u in place (explicit zeros kept), as osqp-python recommends over a rebuild.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import osqp
+import scipy.sparse as sp
+
+OSQP_INFTY = float(osqp.constant("OSQP_INFTY"))  # OSQP's infinity (1e30)
+_INF = np.inf
+
+
+class QpStatus(enum.Enum):
+    """Outcome of one solve, whatever the solver."""
+
+    SOLVED = "solved"
+    SOLVED_INACCURATE = "solved inaccurate"
+    PRIMAL_INFEASIBLE = "primal infeasible"
+    DUAL_INFEASIBLE = "dual infeasible"
+    MAX_ITER_REACHED = "maximum iterations reached"
+    TIME_LIMIT_REACHED = "time limit reached"
+    NON_CONVEX = "problem non convex"
+    INTERRUPTED = "interrupted"
+    UNSOLVED = "unsolved"
+    INVALID_DATA = "invalid data"
+
+
+_OSQP_STATUS = {
+    osqp.SolverStatus.OSQP_SOLVED: QpStatus.SOLVED,
+    osqp.SolverStatus.OSQP_SOLVED_INACCURATE: QpStatus.SOLVED_INACCURATE,
+    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE: QpStatus.PRIMAL_INFEASIBLE,
+    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE: QpStatus.PRIMAL_INFEASIBLE,
+    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE: QpStatus.DUAL_INFEASIBLE,
+    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE_INACCURATE: QpStatus.DUAL_INFEASIBLE,
+    osqp.SolverStatus.OSQP_MAX_ITER_REACHED: QpStatus.MAX_ITER_REACHED,
+    osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED: QpStatus.TIME_LIMIT_REACHED,
+    osqp.SolverStatus.OSQP_NON_CVX: QpStatus.NON_CONVEX,
+    osqp.SolverStatus.OSQP_SIGINT: QpStatus.INTERRUPTED,
+    osqp.SolverStatus.OSQP_UNSOLVED: QpStatus.UNSOLVED,
+}
+
+
+def osqp_status(status_val: int) -> QpStatus:
+    """:class:`QpStatus` of an OSQP ``info.status_val``, through ``osqp.SolverStatus``."""
+    try:
+        return _OSQP_STATUS[osqp.SolverStatus(status_val)]
+    except ValueError:
+        return QpStatus.UNSOLVED
+
+
+@dataclass(frozen=True)
+class QpSettings:
+    """Settings shared by every solve (OSQP's names; a dense solver uses what applies)."""
+
+    eps_abs: float = 1e-4
+    eps_rel: float = 1e-4
+    max_iter: int = 4000
+    polishing: bool = False
+    accept_inaccurate: bool = False
+    check_termination: int = 5
+
+
+@dataclass(frozen=True)
+class QpPattern:
+    """Which entries of P's upper triangle and of A may be non-zero, for one (N_p, N_c):
+    rows and columns in CSC storage order. ``key`` names the pattern (N_p, N_c)."""
+
+    key: tuple[int, int]
+    nz: int                      # variables: 3 N_c increments and the slack
+    m: int                       # constraint rows
+    p_rows: np.ndarray
+    p_cols: np.ndarray
+    a_rows: np.ndarray
+    a_cols: np.ndarray
+
+
+@dataclass
+class CondensedQp:
+    """One condensed QP (module docstring); ``H`` (nz−1, nz−1) is the increments' Hessian
+    (symmetric to rounding: a solver reads its upper triangle), ``slack_hessian`` = 2ρ the
+    slack's, ``A`` (m, nz) dense with zeros off the pattern."""
+
+    pattern: QpPattern
+    H: np.ndarray
+    slack_hessian: float
+    q: np.ndarray
+    A: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclass(frozen=True)
+class QpResult:
+    """What a solver returns: status, its own status text, z (None unless finite and
+    trusted), iterations, and ``ok`` = the solution may be used."""
+
+    status: QpStatus
+    detail: str
+    x: np.ndarray | None
+    iterations: int
+
+    @property
+    def ok(self) -> bool:
+        """A trusted solution (:func:`trusted`) is present."""
+        return self.x is not None
+
+
+class QpSolver(Protocol):
+    """What the MPC needs of a QP solver."""
+
+    def prepare(self, pattern: QpPattern) -> None:
+        """Set up for this pattern ahead of the control loop (may do nothing)."""
+
+    def solve(self, qp: CondensedQp, warm_x: np.ndarray | None) -> QpResult:
+        """Solve ``qp``; ``warm_x`` (nz,) an optional primal warm start."""
+
+
+def trusted(status: QpStatus, x: np.ndarray | None, accept_inaccurate: bool) -> bool:
+    """The one status rule: optimal (or optimal-inaccurate when accepted) and finite."""
+    good = status is QpStatus.SOLVED or (accept_inaccurate
+                                         and status is QpStatus.SOLVED_INACCURATE)
+    return bool(good and x is not None and np.all(np.isfinite(x)))
+
+
+def invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, *matrices: np.ndarray) -> str:
+    """Why a solver's data validation would reject this QP ("" if it would not): a
+    non-finite q, P or A entry, a NaN or +inf lower / -inf upper bound, or l > u (the bounds
+    clipped to ±OSQP_INFTY first, as OSQP's wrapper does)."""
+    for name, v in zip(("q", "P", "A"), (q, *matrices), strict=False):
+        if not np.all(np.isfinite(v)):
+            return f"non-finite {name}"
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo == _INF) or \
+            np.any(hi == -_INF):
+        return "bad bounds"
+    if np.any(np.maximum(lo, -OSQP_INFTY) > np.minimum(hi, OSQP_INFTY)):
+        return "l > u"
+    return ""
+
+
+def _csc_ones(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csc_matrix:
+    """A CSC matrix of ones on a pattern given in CSC storage order."""
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=shape[1]))])
+    return sp.csc_matrix((np.ones(len(rows)), rows.astype(np.int64), indptr), shape=shape)
+
+
+class OsqpSolver:
+    """OSQP (ADMM, sparse), one warm-started instance per :class:`QpPattern`."""
+
+    name = "osqp"
+
+    def __init__(self, settings: QpSettings) -> None:
+        self.settings = settings
+        self.instances: dict[tuple[int, int], osqp.OSQP] = {}
+
+    def prepare(self, pattern: QpPattern) -> None:
+        """Set up the OSQP instance of ``pattern`` (unit data on the full pattern)."""
+        if pattern.key in self.instances:
+            return
+        s = self.settings
+        solver = osqp.OSQP()
+        solver.setup(
+            _csc_ones(pattern.p_rows, pattern.p_cols, (pattern.nz, pattern.nz)),
+            np.zeros(pattern.nz),
+            _csc_ones(pattern.a_rows, pattern.a_cols, (pattern.m, pattern.nz)),
+            -np.ones(pattern.m), np.ones(pattern.m),
+            eps_abs=s.eps_abs, eps_rel=s.eps_rel, max_iter=s.max_iter,
+            polishing=s.polishing, warm_starting=True, verbose=False,
+            check_termination=s.check_termination,
+        )
+        self.instances[pattern.key] = solver
+
+    def solve(self, qp: CondensedQp, warm_x: np.ndarray | None) -> QpResult:
+        """Update the pattern's instance in place, warm-start, solve. A failed solve resets
+        the instance's warm start to zero, so the next step does not start from it."""
+        pat = qp.pattern
+        Px = np.empty(len(pat.p_rows))
+        Px[:-1] = qp.H[pat.p_rows[:-1], pat.p_cols[:-1]]
+        Px[-1] = qp.slack_hessian
+        Ax = qp.A[pat.a_rows, pat.a_cols]
+        bad = invalid_data(qp.q, qp.lo, qp.hi, Px, Ax)
+        if bad:
+            # OSQP would refuse the update (its wrapper ignores that) and solve the previous
+            # step's data: never hand it over.
+            return QpResult(QpStatus.INVALID_DATA, f"invalid data: {bad}", None, 0)
+        self.prepare(pat)
+        s = self.instances[pat.key]
+        s.update(q=qp.q, l=qp.lo, u=qp.hi, Px=Px, Ax=Ax)
+        if warm_x is not None:
+            s.warm_start(x=warm_x)
+        res = s.solve(raise_error=False)
+        status = osqp_status(res.info.status_val)
+        x = res.x
+        if not trusted(status, x, self.settings.accept_inaccurate):
+            s.warm_start(x=np.zeros(pat.nz), y=np.zeros(pat.m))
+            x = None
+        return QpResult(status, str(res.info.status), x, int(res.info.iter))
+
+
+#: solver name (parameter ``qp_solver``) -> factory
+QP_SOLVERS: dict[str, Callable[[QpSettings], QpSolver]] = {"osqp": OsqpSolver}
+
+
+def make_qp_solver(name: str, settings: QpSettings) -> QpSolver:
+    """The solver called ``name`` (:data:`QP_SOLVERS`)."""
+    try:
+        return QP_SOLVERS[name](settings)
+    except KeyError:
+        raise ValueError(f"qp_solver: unknown solver '{name}' (known: "
+                         f"{', '.join(QP_SOLVERS)})") from None
