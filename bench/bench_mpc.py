@@ -30,7 +30,8 @@ for pkg in ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", 
     if p not in sys.path:
         sys.path.insert(0, p)
 
-from fourws_bringup.core.closed_loop import load_mpc_config, run_closed_loop  # noqa: E402
+from fourws_bringup.core.closed_loop import run_closed_loop  # noqa: E402
+from fourws_bringup.core.configs import load_mpc_config  # noqa: E402
 from fourws_mpc.core.controller import MpcController, VehicleSample  # noqa: E402
 
 PAIRS = ((12, 6), (30, 10))

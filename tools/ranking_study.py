@@ -29,22 +29,22 @@ PAPER = ["dlc_60_mu05", "dlc_90_mu06"]
 def cases() -> list[tuple[str, str, str, dict]]:
     """(group, label, scenario, overrides): MPC overrides relative to the shipped
     fourws_mpc/mpc.yaml; the key ``vehicle`` holds plant overrides over vehicle.yaml."""
-    from fourws_bringup.core.closed_loop import load_mpc_config
+    from fourws_bringup.core.configs import load_mpc_config
     from fourws_sim.core.vehicle_params import load_vehicle_params
 
     cfg = load_mpc_config("improved", None)
     S_Y, S_PHI = cfg.scale_y_m, cfg.scale_phi_deg  # noqa: N806
-    C_F, C_R = cfg.cornering_stiffness_front_n_per_rad, cfg.cornering_stiffness_rear_n_per_rad  # noqa: N806
+    C_F, C_R = cfg.cornering_stiffness_front_static_n_per_rad, cfg.cornering_stiffness_rear_static_n_per_rad  # noqa: N806
     M, IZ = cfg.mass_kg, cfg.yaw_inertia_kg_m2  # noqa: N806
     out = []
     for k in (0.1, 0.3, 1.0, 3.0, 10.0):
         for sc in PAPER:
             out.append(("scaling", f"k = {k:g}", sc,
                         {"scale_y_m": S_Y * k, "scale_phi_deg": S_PHI * k}))
-    for label, ov in (("C_alpha x0.7", {"cornering_stiffness_front_n_per_rad": 0.7 * C_F,
-                                         "cornering_stiffness_rear_n_per_rad": 0.7 * C_R}),
-                      ("C_alpha x1.3", {"cornering_stiffness_front_n_per_rad": 1.3 * C_F,
-                                         "cornering_stiffness_rear_n_per_rad": 1.3 * C_R}),
+    for label, ov in (("C_alpha x0.7", {"cornering_stiffness_front_static_n_per_rad": 0.7 * C_F,
+                                         "cornering_stiffness_rear_static_n_per_rad": 0.7 * C_R}),
+                      ("C_alpha x1.3", {"cornering_stiffness_front_static_n_per_rad": 1.3 * C_F,
+                                         "cornering_stiffness_rear_static_n_per_rad": 1.3 * C_R}),
                       ("m, Iz x1.2", {"mass_kg": 1.2 * M, "yaw_inertia_kg_m2": 1.2 * IZ})):
         for sc in PAPER:
             out.append(("mismatch", label, sc, ov))

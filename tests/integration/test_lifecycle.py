@@ -21,8 +21,9 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 
 from fourws_bringup import runner
-from fourws_bringup.bag import read_run
-from fourws_bringup.core.closed_loop import load_mpc_config, run_closed_loop
+from fourws_bringup.bag.run_data import read_run
+from fourws_bringup.core.closed_loop import run_closed_loop
+from fourws_bringup.core.configs import load_mpc_config
 from fourws_bringup.paper import score_run
 from fourws_bringup.supervisor import NodeDied, NodeSpec
 from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_ns

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from fourws_bringup.bag import read_run
-from fourws_bringup.core.closed_loop import load_allocator_config
+from fourws_bringup.bag.run_data import read_run
+from fourws_bringup.core.configs import load_allocator_config
 from fourws_bringup.paper import PAPER_RUNS, allocation_note, metrics_from_run
 from fourws_bringup.report import allocation_audit
 

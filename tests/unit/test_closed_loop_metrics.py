@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from fourws_bringup.core.closed_loop import load_allocator_config, run_closed_loop
+from fourws_bringup.core.closed_loop import run_closed_loop
+from fourws_bringup.core.configs import load_allocator_config
 from fourws_bringup.core.metrics import (
     METRIC_KEYS,
     compute_metrics,

@@ -1,11 +1,11 @@
 """MpcConfig: mpc.yaml mirrors the defaults, presets load, bad values raise naming the field;
 the MPC cores import nothing from ROS."""
 
-import ast
 import dataclasses
 from pathlib import Path
 
 import pytest
+from params_helpers import core_keys
 
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
@@ -17,27 +17,15 @@ PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 
 
 
-def _core(values: dict) -> dict:
-    """The core's keys of a node's params file; the node-level input keys
-    (fourws_common.input_guard.InputConfig) hold their defaults."""
-    import dataclasses as _dc
-
-    from fourws_common.input_guard import InputConfig
-
-    node = {f.name for f in _dc.fields(InputConfig)}
-    assert from_mapping(InputConfig, {k: v for k, v in values.items() if k in node}) == \
-        InputConfig()
-    return {k: v for k, v in values.items() if k not in node}
-
 def _preset(name):
-    values = _core(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    values = core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
     path = config_dir("fourws_bringup") / "controllers" / f"{name}.yaml"
     values.update(load_ros_params_yaml(str(path), "mpc_node"))
     return from_mapping(MpcConfig, values), load_ros_params_yaml(str(path), "allocator_node")
 
 
 def test_mpc_yaml_holds_every_default():
-    values = _core(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    values = core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
     names = {f.name for f in dataclasses.fields(MpcConfig)}
     assert set(values) == names
     assert from_mapping(MpcConfig, values) == MpcConfig()
@@ -93,32 +81,10 @@ def test_unknown_key_is_rejected():
         MpcConfig.from_mapping({"bogus": 1})
 
 
-FORBIDDEN = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "nav_msgs",
-             "geometry_msgs", "fourws_msgs", "rosgraph_msgs", "time")
-
-
-@pytest.mark.parametrize("path", sorted((ROOT / "src/fourws_mpc/fourws_mpc/core").glob("*.py"))
-                         + [ROOT / "src/fourws_bringup/fourws_bringup/core/closed_loop.py",
-                            ROOT / "src/fourws_bringup/fourws_bringup/core/metrics.py"],
-                         ids=lambda p: p.name)
-def test_cores_import_nothing_from_ros(path):
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            mods = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            mods = [node.module or ""]
-        else:
-            continue
-        for m in mods:
-            top = m.split(".")[0]
-            assert top not in FORBIDDEN and not top.endswith("_msgs"), f"{path.name}: {m}"
-
-
 def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
     from fourws_mpc.core.cost_scaling import equal_effect_scaling
 
-    cfg = MpcConfig.from_mapping(_core(load_ros_params_yaml(str(MPC_YAML), "mpc_node")))
+    cfg = MpcConfig.from_mapping(core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node")))
     derived = equal_effect_scaling(cfg, 60.0 / 3.6)
     for key, value in derived.items():
         assert getattr(cfg, key) == pytest.approx(value, rel=0.02), key

@@ -6,6 +6,7 @@ import dataclasses
 
 import pytest
 import yaml
+from params_helpers import core_keys
 
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
@@ -16,26 +17,14 @@ NODE = "speed_pid_node"
 
 
 
-def _core(values: dict) -> dict:
-    """The core's keys of a node's params file; the node-level input keys
-    (fourws_common.input_guard.InputConfig) hold their defaults."""
-    import dataclasses as _dc
-
-    from fourws_common.input_guard import InputConfig
-
-    node = {f.name for f in _dc.fields(InputConfig)}
-    assert from_mapping(InputConfig, {k: v for k, v in values.items() if k in node}) == \
-        InputConfig()
-    return {k: v for k, v in values.items() if k not in node}
-
 def test_yaml_loads_and_mirrors_the_defaults():
-    values = _core(load_ros_params_yaml(str(YAML), NODE))
+    values = core_keys(load_ros_params_yaml(str(YAML), NODE))
     assert set(values) == {f.name for f in dataclasses.fields(SpeedPidConfig)}
     assert from_mapping(SpeedPidConfig, values) == SpeedPidConfig()
 
 
 def test_force_limit_is_four_motors_over_the_wheel_radius():
-    cfg = from_mapping(SpeedPidConfig, _core(load_ros_params_yaml(str(YAML), NODE)))
+    cfg = from_mapping(SpeedPidConfig, core_keys(load_ros_params_yaml(str(YAML), NODE)))
     assert cfg.max_total_torque_nm == 4 * 500.0
     assert cfg.max_force_n == pytest.approx(2000.0 / 0.27)
 
@@ -52,7 +41,7 @@ def test_bad_value_raises_naming_the_key(tmp_path, key, value):
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(data), encoding="utf-8")
     with pytest.raises(ValueError, match=key):
-        from_mapping(SpeedPidConfig, _core(load_ros_params_yaml(str(path), NODE)))
+        from_mapping(SpeedPidConfig, core_keys(load_ros_params_yaml(str(path), NODE)))
 
 
 def test_cross_field_rule_names_both_fields():

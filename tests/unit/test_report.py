@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fourws_bringup.bag import BagError, RunData
-from fourws_bringup.core.closed_loop import load_allocator_config
+from fourws_bringup.bag.errors import BagError
+from fourws_bringup.bag.run_data import RunData
+from fourws_bringup.core.configs import load_allocator_config
 from fourws_bringup.core.metrics import (
     allocate_series,
     compute_metrics,

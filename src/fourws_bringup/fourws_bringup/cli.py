@@ -15,8 +15,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from fourws_common.resources import config_dir
-
 from .runner import COMPOSE_LAYOUTS
 
 
@@ -49,7 +47,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from .bag import BagError
+    from .bag.errors import BagError
     from .paper import metrics_json, report_path
     from .runner import RunError
 
@@ -69,7 +67,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_bag(args: argparse.Namespace) -> int:
-    from .bag import BagError, in_bag_folder, recover, recover_folder
+    from .bag.errors import BagError
+    from .bag.recovery import in_bag_folder, recover, recover_folder
 
     src = Path(args.file)
     try:
@@ -96,10 +95,12 @@ def _cmd_bag(args: argparse.Namespace) -> int:
 
 
 def _cmd_list(kind: str) -> int:
-    folder = (config_dir("fourws_sim") / "scenarios" if kind == "scenarios"
-              else config_dir("fourws_bringup") / "controllers")
-    for p in sorted(folder.glob("*.yaml")):
-        print(p.stem)
+    from fourws_sim.core.scenario import list_scenarios
+
+    from .core.configs import list_controllers
+
+    for name in (list_scenarios() if kind == "scenarios" else list_controllers()):
+        print(name)
     return 0
 
 

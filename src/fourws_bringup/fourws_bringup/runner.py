@@ -25,11 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
-from fourws_common.resources import config_dir
 
+from .core.configs import controller_preset_path, params_files
 from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
 
-CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
 RECORDER_NICE = 10  # niceness added to the recorder process
 #: Process layouts of a run: container process name and the nodes it hosts (None: one
 #: process per node). The recorder is never composed: it is off the control chain.
@@ -45,13 +44,8 @@ class RunError(RuntimeError):
 
 
 def controller_preset(name_or_path: str) -> Path:
-    """Path of a controller preset: a name in fourws_bringup/config/controllers or a file
-    (:func:`fourws_bringup.core.closed_loop.controller_preset_path`), as a ``RunError``."""
-    from .core.closed_loop import controller_preset_path
-
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") and not p.is_file():
-        raise RunError(f"controller preset file not found: {p}")
+    """Path of a controller preset (:func:`fourws_bringup.core.configs.controller_preset_path`),
+    its error as a ``RunError``."""
     try:
         return controller_preset_path(name_or_path).resolve()
     except ValueError as exc:
@@ -150,7 +144,11 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     """
     if compose not in COMPOSE_LAYOUTS:
         raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
-    preset = str(controller_preset(controller))
+    controller_preset(controller)
+
+    def files(node: str) -> list[str]:
+        return [str(f) for f in params_files(node, controller)]
+
     subscribers = 3 + (1 if bag_dir is not None else 0)
     plant_params = {"scenario": scenario_arg(scenario), "mode": mode,
                     "wait_for_subscribers": subscribers,
@@ -160,18 +158,14 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
     specs = [
-        NodeSpec("plant_node", "fourws_sim", "plant_node",
-                 params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
+        NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
                  parameters=plant_params, end_codes=RUN_END_CODES),
-        NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
-                 params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), preset],
+        NodeSpec("mpc_node", "fourws_mpc", "mpc_node", params_files=files("mpc_node"),
                  parameters={"sync": sync}),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
-                 params_files=[str(config_dir("fourws_torque_alloc") / "speed_pid.yaml")],
-                 parameters={"sync": sync}),
+                 params_files=files("speed_pid_node"), parameters={"sync": sync}),
         NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
-                 params_files=[str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
-                               preset], parameters={"sync": sync}),
+                 params_files=files("allocator_node"), parameters={"sync": sync}),
     ]
     if use_sim_time:
         for spec in specs:
@@ -186,7 +180,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
         # the CPU to the nodes the next step waits on: on 2 cores this cut the median step
         # time by about 10 % (docs/architecture.md, "Timing").
         specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
-                              params_files=[str(config_dir("fourws_bringup") / "recorder.yaml")],
+                              params_files=files("recorder_node"),
                               parameters={"output_dir": str(bag_dir),
                                           "start_gate_topic": "/vehicle/state",
                                           "use_sim_time": use_sim_time},

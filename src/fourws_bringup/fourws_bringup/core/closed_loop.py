@@ -1,6 +1,6 @@
 """The whole control loop in one process, without ROS: plant, MPC, speed PID, allocator.
 
-Same sequencing as the lockstep graph (design.md) at every step k::
+Same sequencing as the lockstep graph (docs/architecture.md, "Timing") at every step k::
 
     outputs(k) ──► mpc.step(t_k, outputs(k), mu=mean μ)      → δf, δr, Mz      (mpc_node)
                ──► pid.step(v_ref, vx, T, a_ref)             → T_total         (speed_pid_node)
@@ -10,10 +10,10 @@ Same sequencing as the lockstep graph (design.md) at every step k::
 until the scenario ends (its ``check_end``: end X, duration, end of path, or an abort) or
 ``max_steps``. As in speed_pid_node, v_ref is the reference speed at the path sample nearest
 to the car and a_ref = v dv/ds there (``fourws_common.path_lookup.SpeedProfile``).
-Configuration comes from the same YAML files as the nodes:
-``fourws_mpc/config/mpc.yaml`` with the controller preset
-``fourws_bringup/config/controllers/<name>.yaml`` merged over it (``mpc_node`` and
-``allocator_node`` sections), ``fourws_torque_alloc/config/{speed_pid,allocator}.yaml`` and
+Configuration comes from the same YAML files as the nodes, merged in the same order
+(``fourws_bringup.core.configs``): ``fourws_mpc/config/mpc.yaml`` with the controller preset
+``fourws_bringup/config/controllers/<name>.yaml`` over it (``mpc_node`` and ``allocator_node``
+sections), ``fourws_torque_alloc/config/{speed_pid,allocator}.yaml`` and
 ``fourws_sim/config/plant.yaml`` (period and RK4 substep).
 
 The core reads no clock. Pass ``clock`` (e.g. ``time.perf_counter``) to record the wall time
@@ -26,22 +26,25 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fourws_bringup.core.configs import (
+    load_allocator_config,
+    load_mpc_config,
+    load_pid_config,
+    plant_values,
+)
 from fourws_bringup.core.metrics import run_metrics
-from fourws_common.input_guard import InputConfig
-from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.path_lookup import SpeedProfile
-from fourws_common.resources import config_dir
-from fourws_mpc.core.controller import MpcConfig, MpcController
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_sim.core.scenario import Scenario, load_scenario
 from fourws_sim.core.simulator import Simulator
-from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
-from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
+from fourws_torque_alloc.core.allocation import TorqueAllocator
+from fourws_torque_alloc.core.pid import SpeedPid
 
 STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
                 "steer_front", "steer_rear")
@@ -87,55 +90,6 @@ class ClosedLoopLog:
         return m
 
 
-def controller_preset_path(name_or_path: str) -> Path:
-    """``controllers/<name>.yaml`` of fourws_bringup, or the given file."""
-    p = Path(name_or_path)
-    if name_or_path.endswith((".yaml", ".yml")) or p.is_file():
-        return p
-    path = config_dir("fourws_bringup") / "controllers" / f"{name_or_path}.yaml"
-    if not path.is_file():
-        known = sorted(q.stem for q in path.parent.glob("*.yaml"))
-        raise ValueError(f"controller '{name_or_path}' not found in {path.parent} "
-                         f"(known: {', '.join(known)})")
-    return path
-
-
-def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) -> MpcConfig:
-    """mpc.yaml with the preset's ``mpc_node`` section (and ``overrides``) merged over it."""
-    values = load_ros_params_yaml(str(config_dir("fourws_mpc") / "mpc.yaml"), "mpc_node")
-    values.update(load_ros_params_yaml(str(controller_preset_path(controller)), "mpc_node"))
-    values.update(overrides or {})
-    return MpcConfig.from_mapping(_core_only(values))
-
-
-def load_allocator_config(controller: str | None) -> AllocatorConfig:
-    """allocator.yaml with the preset's ``allocator_node`` section merged over it (the file
-    alone for ``None``)."""
-    values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "allocator.yaml"),
-                                  "allocator_node")
-    if controller is not None:
-        values.update(load_ros_params_yaml(str(controller_preset_path(controller)),
-                                           "allocator_node"))
-    return from_mapping(AllocatorConfig, values)
-
-
-def load_pid_config() -> SpeedPidConfig:
-    """speed_pid.yaml."""
-    values = load_ros_params_yaml(str(config_dir("fourws_torque_alloc") / "speed_pid.yaml"),
-                                  "speed_pid_node")
-    return from_mapping(SpeedPidConfig, _core_only(values))
-
-
-def _core_only(values: dict[str, Any]) -> dict[str, Any]:
-    """A node's params without its node-level input keys (:class:`InputConfig`)."""
-    node_keys = {f.name for f in dataclasses.fields(InputConfig)}
-    return {k: v for k, v in values.items() if k not in node_keys}
-
-
-def _plant_params() -> dict[str, Any]:
-    return load_ros_params_yaml(str(config_dir("fourws_sim") / "plant.yaml"), "plant_node")
-
-
 def with_plant_aborts(scenario: Scenario, plant: dict[str, Any]) -> Scenario:
     """The scenario with plant_node's abort limits, which override the scenario's own (as
     in the graph), so the in-process loop ends a run exactly where the plant node does."""
@@ -167,7 +121,7 @@ def run_closed_loop(
 
     ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests).
     """
-    plant = _plant_params()
+    plant = plant_values()
     scenario = with_plant_aborts(load_scenario(scenario_name_or_path), plant)
     mpc_cfg = load_mpc_config(controller_name, mpc_overrides)
     alloc_cfg = load_allocator_config(controller_name)
@@ -190,7 +144,7 @@ def run_closed_loop(
     k = 0
     while not done and (max_steps is None or k < max_steps):
         t0 = clock() if clock is not None else 0.0
-        res = mpc.step(out.t_s, out, ref, mu=float(np.mean(out.mu)))
+        res = mpc.step(out.t_s, VehicleSample.of(out), ref, mu=float(np.mean(out.mu)))
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
         v_ref, a_ref = speed_ref.at(out.x, out.y)
         drive = pid.step(v_ref, out.vx, dt, a_ref)

@@ -1,0 +1,116 @@
+"""Where every node's parameters come from: package params files and controller presets.
+
+The one owner of configuration loading. A node's parameters are its package params file
+(:data:`PACKAGE_FILES`) and, for the nodes a controller preset configures
+(:data:`PRESET_NODES`), the preset ``fourws_bringup/config/controllers/<name>.yaml`` after it,
+so the preset overrides the package file. :func:`params_files` gives that list in that order:
+the graph passes it as ``--params-file`` arguments (``runner.graph_specs``), and the
+in-process loop, the report and the tools merge the same files in the same order
+(:func:`node_values`, :func:`load_mpc_config`, ...), so the two cannot take a parameter
+differently.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from fourws_common.input_guard import InputConfig
+from fourws_common.params import from_mapping, load_ros_params_yaml
+from fourws_common.resources import config_dir
+from fourws_mpc.core.config import MpcConfig
+from fourws_torque_alloc.core.allocation import AllocatorConfig
+from fourws_torque_alloc.core.pid import SpeedPidConfig
+
+#: node name -> (package, params file in its config/)
+PACKAGE_FILES: dict[str, tuple[str, str]] = {
+    "plant_node": ("fourws_sim", "plant.yaml"),
+    "mpc_node": ("fourws_mpc", "mpc.yaml"),
+    "speed_pid_node": ("fourws_torque_alloc", "speed_pid.yaml"),
+    "allocator_node": ("fourws_torque_alloc", "allocator.yaml"),
+    "recorder_node": ("fourws_bringup", "recorder.yaml"),
+    "replay_node": ("fourws_bringup", "replay.yaml"),
+}
+#: nodes whose sections a controller preset holds
+PRESET_NODES = ("mpc_node", "allocator_node")
+
+
+def controllers_dir() -> Path:
+    """``fourws_bringup/config/controllers``."""
+    return config_dir("fourws_bringup") / "controllers"
+
+
+def list_controllers() -> list[str]:
+    """Names of the shipped controller presets."""
+    return sorted(p.stem for p in controllers_dir().glob("*.yaml"))
+
+
+def controller_preset_path(name_or_path: str) -> Path:
+    """``controllers/<name>.yaml`` of fourws_bringup, or the given file; ``ValueError``
+    naming the known presets otherwise."""
+    p = Path(name_or_path)
+    if name_or_path.endswith((".yaml", ".yml")) or p.is_file():
+        if not p.is_file():
+            raise ValueError(f"controller preset file not found: {p}")
+        return p
+    path = controllers_dir() / f"{name_or_path}.yaml"
+    if not path.is_file():
+        raise ValueError(f"controller '{name_or_path}' not found in {path.parent} "
+                         f"(known: {', '.join(list_controllers())})")
+    return path
+
+
+def package_file(node: str) -> Path:
+    """The package params file of ``node``."""
+    package, name = PACKAGE_FILES[node]
+    return config_dir(package) / name
+
+
+def params_files(node: str, controller: str | None = None) -> list[Path]:
+    """The params files of ``node`` in the order they apply: the package file, then the
+    controller preset for :data:`PRESET_NODES` (when ``controller`` is given)."""
+    files = [package_file(node)]
+    if controller is not None and node in PRESET_NODES:
+        files.append(controller_preset_path(controller).resolve())
+    return files
+
+
+def node_values(node: str, controller: str | None = None,
+                overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``node``'s parameters merged from :func:`params_files` (later files win), then
+    ``overrides``."""
+    values: dict[str, Any] = {}
+    for path in params_files(node, controller):
+        values.update(load_ros_params_yaml(str(path), node))
+    values.update(overrides or {})
+    return values
+
+
+def core_values(values: dict[str, Any]) -> dict[str, Any]:
+    """A node's parameters without its node-level input keys (:class:`InputConfig`), i.e.
+    the keys of its core's config dataclass."""
+    node_keys = {f.name for f in dataclasses.fields(InputConfig)}
+    return {k: v for k, v in values.items() if k not in node_keys}
+
+
+def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) -> MpcConfig:
+    """mpc.yaml with the preset's ``mpc_node`` section (and ``overrides``) merged over it."""
+    return MpcConfig.from_mapping(core_values(node_values("mpc_node", controller, overrides)))
+
+
+def load_allocator_config(controller: str | None) -> AllocatorConfig:
+    """allocator.yaml with the preset's ``allocator_node`` section merged over it (the file
+    alone for ``None``)."""
+    return from_mapping(AllocatorConfig, core_values(node_values("allocator_node",
+                                                                 controller)))
+
+
+def load_pid_config() -> SpeedPidConfig:
+    """speed_pid.yaml."""
+    return from_mapping(SpeedPidConfig, core_values(node_values("speed_pid_node")))
+
+
+def plant_values() -> dict[str, Any]:
+    """plant.yaml's ``plant_node`` parameters."""
+    return node_values("plant_node")
