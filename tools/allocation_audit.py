@@ -15,7 +15,8 @@ import argparse
 import json
 import sys
 
-from fourws_bringup.bag import BagError, read_run
+from fourws_bringup.bag.errors import BagError
+from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.report import allocation_audit
 
 

@@ -15,8 +15,9 @@ import shutil
 import sys
 from pathlib import Path
 
-from fourws_bringup.bag import read_run
-from fourws_bringup.paper import PAPER_RUNS, metrics_from_run
+from fourws_bringup.bag.run_data import read_run
+from fourws_bringup.paper import PAPER_RUNS
+from fourws_bringup.scoring import bag_metrics
 
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
         "max_abs_heading_error_deg", "rmse_heading_error_deg", "max_abs_sideslip_deg",
@@ -33,7 +34,7 @@ def main(src: str) -> int:
             shutil.rmtree(dst)
         shutil.copytree(Path(src) / name / "bag", dst)
         run = read_run(dst)
-        m = metrics_from_run(run)
+        m = bag_metrics(run)
         status = run.status or {}
         size = sum(f.stat().st_size for f in dst.iterdir()) / 1e6
         rows.append(f"| `{name}` | {m['steps']} | "

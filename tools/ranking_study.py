@@ -34,7 +34,8 @@ def cases() -> list[tuple[str, str, str, dict]]:
 
     cfg = load_mpc_config("improved", None)
     S_Y, S_PHI = cfg.scale_y_m, cfg.scale_phi_deg  # noqa: N806
-    C_F, C_R = cfg.cornering_stiffness_front_static_n_per_rad, cfg.cornering_stiffness_rear_static_n_per_rad  # noqa: N806
+    C_F = cfg.cornering_stiffness_front_static_n_per_rad  # noqa: N806
+    C_R = cfg.cornering_stiffness_rear_static_n_per_rad  # noqa: N806
     M, IZ = cfg.mass_kg, cfg.yaw_inertia_kg_m2  # noqa: N806
     out = []
     for k in (0.1, 0.3, 1.0, 3.0, 10.0):

@@ -26,9 +26,11 @@ import pytest
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile
 
-from fourws_bringup.bag import read_run
+from fourws_bringup.bag.run_data import read_run
+from fourws_bringup.cli import run_and_score
 from fourws_bringup.core.closed_loop import run_closed_loop
-from fourws_bringup.paper import metrics_from_run, rank, run_and_score
+from fourws_bringup.paper import rank
+from fourws_bringup.scoring import bag_metrics
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import stamp_to_ns
 from fourws_common.qos import CONTROL_QOS
@@ -173,5 +175,5 @@ def test_report_recomputes_metrics_from_the_bag(runs, tmp_path):
                 "rmse_sideslip_deg", "mpc_solve_ms_p50", "mpc_solve_ms_p99", "steps"):
         assert again[key] == m[key], key
     assert (out / "plots").is_dir() and any((out / "plots").glob("*.png"))
-    recomputed = metrics_from_run(read_run(folder))
+    recomputed = bag_metrics(read_run(folder))
     assert recomputed["max_abs_lateral_error_m"] == m["max_abs_lateral_error_m"]

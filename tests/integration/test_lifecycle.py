@@ -24,7 +24,7 @@ from fourws_bringup import runner
 from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.core.closed_loop import run_closed_loop
 from fourws_bringup.core.configs import load_mpc_config
-from fourws_bringup.paper import score_run
+from fourws_bringup.scoring import score_run
 from fourws_bringup.supervisor import NodeDied, NodeSpec
 from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_ns
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode

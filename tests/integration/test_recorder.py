@@ -18,7 +18,9 @@ import yaml
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from fourws_bringup.bag import BagError, read_run, recover
+from fourws_bringup.bag.errors import BagError
+from fourws_bringup.bag.recovery import recover
+from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import ns_to_stamp
 from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS

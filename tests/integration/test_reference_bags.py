@@ -14,8 +14,9 @@ import pytest
 
 from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.core.configs import load_allocator_config
-from fourws_bringup.paper import PAPER_RUNS, allocation_note, metrics_from_run
+from fourws_bringup.paper import PAPER_RUNS, allocation_note
 from fourws_bringup.report import allocation_audit
+from fourws_bringup.scoring import bag_metrics
 
 BAGS = Path(__file__).resolve().parents[2] / "bags"
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
@@ -46,7 +47,7 @@ def test_every_paper_configuration_has_a_bag_under_5_mb():
 @pytest.mark.parametrize("name", [f"{c}@{s}" for c, s in PAPER_RUNS])
 def test_bag_metrics_equal_the_readme(name):
     want = readme_rows()[name]
-    m = metrics_from_run(read_run(BAGS / name))
+    m = bag_metrics(read_run(BAGS / name))
     assert m["steps"] == want["steps"]
     for key in KEYS:
         assert m[key] == pytest.approx(want[key], abs=5e-6), key

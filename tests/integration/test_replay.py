@@ -12,10 +12,11 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from fourws_bringup.bag import BagWriter, topic_info
+from fourws_bringup.bag.writer import BagWriter
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import ns_to_stamp, stamp_to_ns
 from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_common.topics import topic_info
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
 
 pytestmark = pytest.mark.integration

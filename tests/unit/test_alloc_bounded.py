@@ -30,7 +30,7 @@ from fourws_torque_alloc.core.allocation import (
 )
 
 CFG = AllocatorConfig(method="optimal_bounded")
-B, R, TMAX = CFG.track_width_m, CFG.wheel_radius_m, CFG.max_motor_torque_nm
+B, R, TMAX = CFG.track_width_m, CFG.wheel_radius_m, CFG.motor_torque_max_nm
 K = B / (2.0 * R)
 A_T = np.ones(4)
 A_M = K * np.array([-1.0, 1.0, -1.0, 1.0])
@@ -45,7 +45,7 @@ def bounds_oracle(fz, fy, mu, cfg=CFG) -> np.ndarray:
     out = np.zeros(4)
     for i in range(4):
         if fz[i] > cfg.min_fz_n and mu[i] * fz[i] > 1e-3:
-            out[i] = min(cfg.max_motor_torque_nm,
+            out[i] = min(cfg.motor_torque_max_nm,
                          cfg.wheel_radius_m * math.sqrt(max((mu[i] * fz[i]) ** 2 - fy[i] ** 2,
                                                             0.0)))
     return out

@@ -25,7 +25,7 @@ from fourws_torque_alloc.core.allocation import (
 
 CFG = AllocatorConfig()
 # Motor limits out of the way: the equalities of eq. (27) are then exactly attainable.
-CFG_UNLIMITED = AllocatorConfig(max_motor_torque_nm=1.0e5)
+CFG_UNLIMITED = AllocatorConfig(motor_torque_max_nm=1.0e5)
 B, R = CFG.track_width_m, CFG.wheel_radius_m
 
 
@@ -124,7 +124,7 @@ def test_rule_and_optimal_clip_to_motor_limits_and_report(t, mz, fz, mu):
     for fn in (rule, optimal):
         res = fn(t, mz, fz, np.zeros(4), mu, CFG)
         tq = res.torque_nm
-        assert np.all(np.abs(tq) <= CFG.max_motor_torque_nm)
+        assert np.all(np.abs(tq) <= CFG.motor_torque_max_nm)
         assert math.isclose(res.unmet_torque_nm, t - tq.sum(), abs_tol=1e-9)
         assert math.isclose(res.unmet_yaw_moment_nm, mz - yaw_moment_nm(tq, CFG), abs_tol=1e-9)
         clipped = fn(t, mz, fz, np.zeros(4), mu, CFG_UNLIMITED).torque_nm
@@ -152,7 +152,7 @@ def test_wheel_in_the_air_gives_finite_output(method, t, mz, fz, fy, mu):
     assert res.torque_nm.shape == (4,)
     assert np.all(np.isfinite(res.torque_nm))
     assert math.isfinite(res.unmet_torque_nm) and math.isfinite(res.unmet_yaw_moment_nm)
-    assert np.all(np.abs(res.torque_nm) <= CFG.max_motor_torque_nm + 1e-9)
+    assert np.all(np.abs(res.torque_nm) <= CFG.motor_torque_max_nm + 1e-9)
 
 
 def test_optimal_one_wheel_in_air_partner_takes_the_side():

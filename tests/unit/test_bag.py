@@ -1,4 +1,5 @@
-"""fourws_bringup.bag: schema text, rosbag2 layout, reading back independently, recovery.
+"""fourws_bringup.bag (its modules schema, metadata, writer, reader, run_data, recovery):
+schema text, rosbag2 layout, reading back independently, recovery.
 
 Oracles: ``rosbags`` (an independent reader of rosbag2 folders and MCAP, with its own msg
 parser and RIHS01 hashing), the installed ``.json`` type descriptions (type hashes), mcap's
@@ -25,20 +26,19 @@ from rclpy.serialization import serialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-from fourws_bringup.bag import (  # noqa: E402
-    DEFAULT_TOPICS,
-    TOPICS,
-    BagError,
-    BagWriter,
+from fourws_bringup.bag.errors import BagError  # noqa: E402
+from fourws_bringup.bag.recovery import recover  # noqa: E402
+from fourws_bringup.bag.run_data import read_run  # noqa: E402
+from fourws_bringup.bag.schema import (  # noqa: E402
     cdr_stamp_ns,
     message_definition,
     msg_dependencies,
-    read_run,
-    recover,
-    topic_info,
+    msg_file,
     type_hash,
 )
-from fourws_bringup.paper import step_latencies_ms  # noqa: E402
+from fourws_bringup.bag.writer import BagWriter  # noqa: E402
+from fourws_bringup.scoring import step_latencies_ms  # noqa: E402
+from fourws_common.topics import DEFAULT_TOPICS, TOPICS, topic_info  # noqa: E402
 from fourws_msgs.msg import (  # noqa: E402
     MpcCommand,
     MpcDiagnostics,
@@ -153,17 +153,56 @@ def test_vehicle_state_schema_parses_with_rosbags_including_its_dependencies():
         "fourws_msgs/msg/VehicleState")
 
 
-@pytest.mark.parametrize("topic", DEFAULT_TOPICS)
-def test_every_graph_type_has_a_complete_definition(topic):
-    """Complete = rosbags' RIHS01 of the parsed text equals the hash rosidl generated."""
+def _rosidl_hash(typ: str) -> str:
+    """The RIHS01 hash rosidl generated for a type (its installed ``.json``)."""
+    data = json.loads(msg_file(typ).with_suffix(".json").read_text(encoding="utf-8"))
+    return next(e["hash_string"] for e in data["type_hashes"] if e["type_name"] == typ)
+
+
+def _store_from_msg_files(typ: str):
+    """A rosbags type store holding ``typ`` and everything it uses, each registered from its
+    own installed ``.msg`` file (fourws_msgs too), not from the schema text under test."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    typ = TOPICS[topic][0]
-    text = message_definition(typ)
-    store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_msg(text, typ))
+    store, todo, seen = get_typestore(Stores.EMPTY), [typ], set()
+    while todo:
+        t = todo.pop()
+        if t in seen:
+            continue
+        seen.add(t)
+        text = msg_file(t).read_text(encoding="utf-8")
+        store.register(get_types_from_msg(text, t))
+        todo += [f"{d.split('/')[0]}/msg/{d.split('/')[1]}"
+                 for d in msg_dependencies(text, t.split("/")[0])]
+    return store
+
+
+@pytest.mark.parametrize("topic", DEFAULT_TOPICS)
+def test_every_graph_type_has_a_complete_definition(topic):
+    """Complete = RIHS01 of the schema text (rosbags) equals the hash rosidl generated."""
+    typ = TOPICS[topic].type
     assert type_hash(typ).startswith("RIHS01_")
-    assert store.hash_rihs01(typ) == type_hash(typ)
+    assert type_hash(typ) == _rosidl_hash(typ)
+
+
+@pytest.mark.parametrize("topic", DEFAULT_TOPICS)
+def test_schema_text_against_rosbags_generate_msgdef(topic):
+    """rosbags' ``generate_msgdef`` from the installed .msg files describes the same fields
+    as the schema text, and ``hash_rihs01`` gives the same hash; but its text is not the
+    bytes rosbag2 writes (it drops the comments and layout of the .msg files), which is why
+    bag/schema.py keeps its own text (see its docstring)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    typ = TOPICS[topic].type
+    ours = message_definition(typ)
+    files = _store_from_msg_files(typ)
+    parsed = get_typestore(Stores.EMPTY)
+    parsed.register(get_types_from_msg(ours, typ))
+    generated, _ = files.generate_msgdef(typ, ros_version=2)
+    assert parsed.generate_msgdef(typ, ros_version=2)[0] == generated
+    assert files.hash_rihs01(typ) == type_hash(typ)
+    assert ours.startswith(msg_file(typ).read_text(encoding="utf-8").rstrip("\n"))
+    assert generated != ours
 
 
 def test_dependencies_of_a_msg_text():
@@ -462,14 +501,14 @@ def test_recover_of_a_whole_file_keeps_everything(tmp_path):
 
 
 def test_bag_qos_table_matches_the_graph_profiles():
-    from fourws_bringup.bag import QOS_KINDS
     from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+    from fourws_common.topics import QOS_KINDS
 
     for kind, profile in (("control", CONTROL_QOS), ("latched", LATCHED_QOS),
                           ("clock", CLOCK_QOS)):
-        assert QOS_KINDS[kind]["depth"] == profile.depth, kind
-        assert QOS_KINDS[kind]["durability"] == profile.durability.name.lower(), kind
-        assert QOS_KINDS[kind]["reliability"] == profile.reliability.name.lower(), kind
+        assert QOS_KINDS[kind].depth == profile.depth, kind
+        assert QOS_KINDS[kind].durability == profile.durability.name.lower(), kind
+        assert QOS_KINDS[kind].reliability == profile.reliability.name.lower(), kind
 
 
 def test_rejection_counts_from_diagnostics_reach_the_metrics(tmp_path):
@@ -477,7 +516,7 @@ def test_rejection_counts_from_diagnostics_reach_the_metrics(tmp_path):
     metrics: the highest count each node reported, only nodes that rejected something."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-    from fourws_bringup.paper import metrics_from_run
+    from fourws_bringup.scoring import bag_metrics
 
     write_run_bag(tmp_path / "bag", steps=30)
     w = BagWriter(tmp_path / "diag", [topic_info("/diagnostics")])
@@ -494,6 +533,6 @@ def test_rejection_counts_from_diagnostics_reach_the_metrics(tmp_path):
     assert run.rejections == {"mpc_node": {"future_stamp": 3},
                               "speed_pid_node": {"implausible_state": 0}}
     full = read_run(tmp_path / "bag")
-    assert metrics_from_run(full)["input_rejections"] == {}
+    assert bag_metrics(full)["input_rejections"] == {}
     full.rejections = run.rejections
-    assert metrics_from_run(full)["input_rejections"] == {"mpc_node": {"future_stamp": 3}}
+    assert bag_metrics(full)["input_rejections"] == {"mpc_node": {"future_stamp": 3}}

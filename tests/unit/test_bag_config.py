@@ -7,9 +7,9 @@ import dataclasses
 
 import pytest
 
-from fourws_bringup.bag import DEFAULT_TOPICS, topic_info
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
+from fourws_common.topics import DEFAULT_TOPICS, topic_info
 
 pytest.importorskip("rclpy")
 from fourws_bringup.recorder_node import RecorderConfig  # noqa: E402

@@ -26,10 +26,14 @@ from rclpy.serialization import serialize_message  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from fourws_bringup import cli  # noqa: E402
-from fourws_bringup.bag import DEFAULT_TOPICS, BagWriter, read_run, topic_info  # noqa: E402
-from fourws_bringup.paper import paper_folder_problem, report_path, strict_metrics  # noqa: E402
+from fourws_bringup.bag.run_data import read_run  # noqa: E402
+from fourws_bringup.bag.writer import BagWriter  # noqa: E402
+from fourws_bringup.cli import report_path  # noqa: E402
+from fourws_bringup.paper import paper_folder_problem  # noqa: E402
 from fourws_bringup.runner import RunError, prepare_out_dir  # noqa: E402
+from fourws_bringup.scoring import strict_metrics  # noqa: E402
 from fourws_common.conversions import ns_to_stamp  # noqa: E402
+from fourws_common.topics import DEFAULT_TOPICS, topic_info  # noqa: E402
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState  # noqa: E402
 from fourws_sim.core.scenario import load_scenario  # noqa: E402
 

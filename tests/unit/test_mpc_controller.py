@@ -174,7 +174,7 @@ def test_prebuild_creates_every_reachable_instance():
 
 
 def test_model_params_follow_the_config():
-    p = MpcConfig(cornering_stiffness_front_n_per_rad=25000.0).model_params()
+    p = MpcConfig(cornering_stiffness_front_static_n_per_rad=25000.0).model_params()
     assert isinstance(p, ModelParams) and p.c_cf == 25000.0
 
 

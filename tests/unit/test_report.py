@@ -26,10 +26,10 @@ from fourws_bringup.report import (
     draw_comparison,
     draw_figures,
     figures_markdown,
-    metrics_from_run,
     metrics_table_markdown,
     series_of,
 )
+from fourws_bringup.scoring import tracking_metrics
 
 DT = 0.01
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -83,9 +83,9 @@ def test_plotted_errors_on_a_straight_path_are_the_offset_and_the_yaw():
     np.testing.assert_array_equal(s.torque[:, 3], 13.0)
 
 
-def test_metrics_from_run_are_the_core_metrics_of_the_exact_errors():
+def test_tracking_metrics_are_the_core_metrics_of_the_exact_errors():
     run = make_run()
-    m = metrics_from_run(run)
+    m = tracking_metrics(run)
     exact = compute_metrics(run.state["y"], run.state["yaw"], run.state["sideslip"],
                             run.mpc_diagnostics["solve_time_ms"])
     for key, v in exact.items():
@@ -96,7 +96,7 @@ def test_metrics_from_run_are_the_core_metrics_of_the_exact_errors():
 
 def test_metrics_need_a_reference():
     with pytest.raises(BagError, match="reference"):
-        metrics_from_run(make_run(with_reference=False))
+        tracking_metrics(make_run(with_reference=False))
 
 
 def test_without_a_reference_the_mpc_diagnostics_errors_are_plotted_by_stamp():
@@ -159,7 +159,7 @@ def test_markdown_helpers():
 
 
 def test_missing_steps_counts_gaps_in_any_per_step_topic():
-    from fourws_bringup.paper import missing_steps
+    from fourws_bringup.scoring import missing_steps
 
     run = make_run(n=200)
     assert missing_steps(run) == 99                  # make_run's diagnostics: every other step
@@ -203,7 +203,7 @@ def test_rankings_group_ties_within_one_percent_and_aborted_runs_rank_last():
 def test_paper_exit_status_counts_broken_runs_not_aborted_ones():
     """An aborted run (the car left the corridor: a result) keeps `fourws paper` at exit 0;
     a dead node, missing metrics or steps missing from the bag make it fail, with the why."""
-    from fourws_bringup.paper import run_failure
+    from fourws_bringup.scoring import run_failure
 
     aborted = {"completed": False, "reason": "aborted: lateral error +5.02 m beyond ±5 m",
                "steps": 694, "missing_steps": 0}

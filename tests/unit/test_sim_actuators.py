@@ -14,9 +14,10 @@ from fourws_sim.core.actuators import (
     motor_transfer_function,
     steer_derivative,
 )
+from fourws_sim.core.plant_io import InitialState
 from fourws_sim.core.road import ConstantRoad
-from fourws_sim.core.simulator import InitialState, Simulator
-from fourws_sim.core.vehicle import load_vehicle_params
+from fourws_sim.core.simulator import Simulator
+from fourws_sim.core.vehicle_params import load_vehicle_params
 
 P = load_vehicle_params()
 

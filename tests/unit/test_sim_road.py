@@ -5,14 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fourws_common.wheels import WHEEL_SIDE, Wheel
+from fourws_sim.core.plant_io import InitialState
 from fourws_sim.core.road import (
     ConstantRoad,
     PiecewiseXRoad,
     SplitRoad,
     road_from_mapping,
 )
-from fourws_sim.core.simulator import InitialState, Simulator
-from fourws_sim.core.vehicle import WHEEL_SIDE, Wheel, load_vehicle_params
+from fourws_sim.core.simulator import Simulator
+from fourws_sim.core.vehicle_params import load_vehicle_params
 
 SIDE = np.array(WHEEL_SIDE)
 P = load_vehicle_params()

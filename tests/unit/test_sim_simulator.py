@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fourws_sim.core.plant_io import InitialState, PlantOutputs
 from fourws_sim.core.road import ConstantRoad
-from fourws_sim.core.simulator import InitialState, PlantOutputs, Simulator
-from fourws_sim.core.vehicle import N_STATE, State, TwoTrackModel, load_vehicle_params
+from fourws_sim.core.simulator import Simulator
+from fourws_sim.core.vehicle import N_STATE, State, TwoTrackModel
+from fourws_sim.core.vehicle_params import load_vehicle_params
 
 ROOT = Path(__file__).resolve().parents[2]
 P = load_vehicle_params()

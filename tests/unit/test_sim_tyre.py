@@ -14,8 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fourws_common.wheels import Wheel
 from fourws_sim.core import tyre
-from fourws_sim.core.vehicle import Wheel, _tyre_forces, load_vehicle_params, read_vehicle_yaml
+from fourws_sim.core.vehicle import _tyre_forces
+from fourws_sim.core.vehicle_params import load_vehicle_params, read_vehicle_yaml
 
 P = load_vehicle_params()
 FRONT, REAR = P.tyre("front"), P.tyre("rear")

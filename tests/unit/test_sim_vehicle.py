@@ -14,9 +14,11 @@ import math
 import numpy as np
 import pytest
 
+from fourws_common.wheels import Wheel
+from fourws_sim.core.plant_io import InitialState, PlantOutputs
 from fourws_sim.core.road import ConstantRoad
-from fourws_sim.core.simulator import InitialState, PlantOutputs, Simulator
-from fourws_sim.core.vehicle import VehicleParams, Wheel, load_vehicle_params
+from fourws_sim.core.simulator import Simulator
+from fourws_sim.core.vehicle_params import VehicleParams, load_vehicle_params
 
 P = load_vehicle_params()
 M, L, A, B_CG = P.mass_kg, P.wheelbase_m, P.cg_to_front_axle_m, P.cg_to_rear_axle_m

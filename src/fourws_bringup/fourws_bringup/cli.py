@@ -18,9 +18,74 @@ from pathlib import Path
 from .runner import COMPOSE_LAYOUTS
 
 
+def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
+                  mode: str = "lockstep", plots: bool = True, progress: bool = True,
+                  compose: str = "none") -> dict:
+    """``fourws run``: one run over topics, then metrics.json and plots from its bag.
+
+    ``compose``: the process layout (:func:`fourws_bringup.runner.graph_specs`), recorded in
+    metrics.json; it changes the timing only, never a recorded value.
+    """
+    from fourws_common.exit_codes import ExitCode
+    from fourws_sim.core.scenario import load_scenario
+
+    from .bag.run_data import read_run
+    from .report import draw_figures
+    from .runner import RunError, controller_preset, prepare_out_dir, run_graph
+    from .scoring import score_run, write_metrics
+
+    controller_preset(controller)
+    try:
+        sc = load_scenario(scenario)
+    except (ValueError, FileNotFoundError) as exc:
+        why = str(exc).removeprefix(f"{Path(scenario)}: ")  # the file is named once
+        raise RunError(f"scenario '{scenario}': {why}") from exc
+    prepare_out_dir(out_dir, force)
+    print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
+    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
+                        compose=compose)
+    try:
+        metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
+    except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
+        metrics = {"scenario": sc.name, "controller": controller, "completed": False,
+                   "reason": f"{outcome.reason}; metrics failed: {exc}",
+                   "wall_time_s": outcome.wall_time_s, "exit_code": int(ExitCode.ERROR)}
+        if outcome.died:
+            metrics["died"] = outcome.died
+            metrics["died_error"] = outcome.died_error
+    metrics["compose"] = compose
+    write_metrics(out_dir, metrics)
+    if plots and (out_dir / "bag").exists():
+        try:
+            draw_figures(read_run(out_dir), out_dir / "plots")
+        except Exception as exc:  # noqa: BLE001
+            print(f"[fourws] figures failed: {exc}", file=sys.stderr)
+    return metrics
+
+
+def report_path(path: Path, out: Path | None = None) -> dict:
+    """``fourws report``: metrics.json and figures recomputed from a bag or run folder.
+
+    A ``RunError`` (before the bag is read) when ``out`` cannot be written.
+    """
+    from .bag.run_data import read_run
+    from .report import draw_figures
+    from .runner import writable_dir
+    from .scoring import score_run, write_metrics
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag or run folder")
+    out = out or (path if (path / "bag").is_dir() else path.parent)
+    writable_dir(out)
+    metrics = score_run(path)
+    write_metrics(out, metrics)
+    draw_figures(read_run(path), out / "plots")
+    return metrics
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .paper import metrics_json, run_and_score
     from .runner import RunError
+    from .scoring import metrics_json
 
     try:
         metrics = run_and_score(args.scenario, args.controller, Path(args.out),
@@ -48,8 +113,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from .bag.errors import BagError
-    from .paper import metrics_json, report_path
     from .runner import RunError
+    from .scoring import metrics_json
 
     try:
         metrics = report_path(Path(args.path), Path(args.out) if args.out else None)

@@ -1,21 +1,20 @@
 """Reproduce the paper's evidence: runs, metrics from bags, Tables 6-8, report.md.
 
-Every number printed here is computed from a recorded bag by :func:`score_run`, the same code
-``fourws report`` uses, so any table can be regenerated from the bags alone.
+Only the paper's side: its printed tables (Tables 6-8), the eight configurations, the ranking
+of each table beside the paper's, the allocation note and ``fourws paper``. Every number is
+computed from a recorded bag by ``scoring.score_run`` (the same code ``fourws run`` and
+``fourws report`` use), so any table can be regenerated from the bags alone.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import sys
 import time
-from collections.abc import Mapping
 from pathlib import Path
 
-from fourws_common.exit_codes import ExitCode
-
-from .runner import RunError, RunOutcome, prepare_out_dir, run_folder_problem, run_graph
+from .cli import run_and_score
+from .runner import prepare_out_dir, run_folder_problem
+from .scoring import run_failure
 
 # Paper, Tables 6-8: (max |eY| m, RMSE eY m, MAE eY m, max |eφ| deg, RMSE eφ deg)
 PAPER_T6 = {
@@ -49,7 +48,6 @@ TABLES = (
 PAPER_RUNS = [(c, "dlc_60_mu05") for c in ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
                                               "ampc_4ws_dyc")] + \
              [(c, "dlc_90_mu06") for c in ("mpc_fws", "mpc_4ws", "improved")]
-DEADLINE_MS = 10.0
 # Completed runs whose max |eY| differ by less than this fraction of the larger one tie: the
 # lockstep runs are deterministic, but an order decided by under 1 % is not a finding.
 TIE_REL = 0.01
@@ -57,258 +55,6 @@ TIE_REL = 0.01
 
 def run_dir_name(controller: str, scenario: str) -> str:
     return f"{controller}@{Path(scenario).stem}"
-
-
-def strict_metrics(metrics: Mapping) -> dict:
-    """``metrics`` as strict JSON (RFC 8259) can hold it: every float that is not finite
-    (NaN, ±inf: a metric of states that hold NaN, a wall time the bag does not have) becomes
-    null, and ``null_reasons`` maps its key path (``step_latency_ms.step.p50``, ``x[2]``) to
-    why (``"not finite (nan)"``), so no null in metrics.json is left unexplained."""
-    import numpy as np
-
-    reasons: dict[str, str] = dict(metrics.get("null_reasons") or {})
-
-    def clean(v, path: str):
-        if isinstance(v, Mapping):
-            return {k: clean(x, f"{path}.{k}" if path else str(k)) for k, x in v.items()
-                    if not (k == "null_reasons" and not path)}
-        if isinstance(v, list | tuple | np.ndarray):
-            return [clean(x, f"{path}[{i}]") for i, x in enumerate(v)]
-        if isinstance(v, np.generic):
-            v = v.item()
-        if isinstance(v, float) and not math.isfinite(v):
-            reasons[path] = f"not finite ({v})"
-            return None
-        return v
-
-    out = clean(metrics, "")
-    if reasons:
-        out["null_reasons"] = reasons
-    return out
-
-
-def metrics_json(metrics: Mapping) -> str:
-    """The text of metrics.json: :func:`strict_metrics`, indented, no NaN or Infinity."""
-    return json.dumps(strict_metrics(metrics), indent=2, allow_nan=False) + "\n"
-
-
-def write_metrics(folder: Path, metrics: Mapping) -> Path:
-    """Write ``folder/metrics.json`` (:func:`metrics_json`); a ``RunError`` if it cannot."""
-    path = folder / "metrics.json"
-    try:
-        path.write_text(metrics_json(metrics), encoding="utf-8")
-    except OSError as exc:
-        raise RunError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path
-
-
-def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
-              controller: str | None = None) -> dict:
-    """metrics.json content for a run folder or bag, computed from the bag alone.
-
-    ``outcome`` adds what only the live run knows (wall time, a node that died).
-    """
-    from .bag import read_run
-
-    run = read_run(path)
-    m = metrics_from_run(run)
-    # The plant's final status: from its status file (outcome) when the live run has one,
-    # else as recorded in the bag.
-    recorded = run.status if (run.status or {}).get("state") == "ended" else None
-    status = (outcome.status if outcome is not None and outcome.status else None) \
-        or recorded or {}
-    scenario = scenario or status.get("scenario") or "unknown"
-    controller = controller or (run.controller or "unknown")
-    out = {"scenario": Path(scenario).stem, "controller": controller}
-    out["steps"] = int(m.pop("steps"))
-    out["sim_time_s"] = float(m.pop("sim_time_s"))
-    # The plant's own span from its first answered state to the end (in the bag; the wait
-    # before it, nodes discovering each other, is startup_wait_s); the runner's clock only
-    # when the bag has none (a plant that died).
-    wall = status.get("wall_time_s")
-    if not isinstance(wall, int | float) or not wall > 0:
-        wall = outcome.wall_time_s if outcome else float("nan")
-    out["wall_time_s"] = wall
-    out["real_time_factor"] = out["sim_time_s"] / wall if wall and wall == wall else None
-    startup = status.get("startup_wait_s")
-    out["startup_wait_s"] = float(startup) if isinstance(startup, int | float) else None
-    out.update(m)
-    for key in ("late_commands", "safe_hold_steps", "overruns", "rejected_commands"):
-        if isinstance(status.get(key), int):
-            out[key] = status[key]
-    if outcome is not None and (outcome.status or outcome.died or not recorded):
-        out["completed"] = bool(outcome.completed)
-        out["reason"] = outcome.reason
-        if outcome.died:
-            out["died"] = outcome.died
-            out["died_error"] = outcome.died_error
-        out["exit_code"] = int(outcome.code)
-    else:
-        out["completed"] = bool(status.get("completed", False))
-        out["reason"] = str(status.get("reason", "no /run/status in the bag"))
-        code = status.get("exit_code")
-        out["exit_code"] = int(code) if isinstance(code, int) else (
-            0 if out["completed"] else None)
-    return out
-
-
-def metrics_from_run(run) -> dict:
-    """Table 6-8 metrics (:func:`fourws_bringup.report.metrics_from_run`) plus deadline
-    misses, solver fallbacks and the horizon ranges of a decoded bag."""
-    import numpy as np
-
-    from .report import metrics_from_run as core_metrics
-
-    m = core_metrics(run)
-    m["steps"] = max(run.steps - 1, 0)  # control steps: the last state gets no command
-    diag = run.mpc_diagnostics
-    solve = np.asarray(diag.get("solve_time_ms", np.zeros(0)), dtype=float)
-    m["deadline_misses"] = int(np.sum(solve > DEADLINE_MS))
-    for key in ("np", "nc"):
-        v = diag.get(key)
-        if v is not None and len(v):
-            m[f"{key}_min"], m[f"{key}_max"] = int(np.min(v)), int(np.max(v))
-    fb = diag.get("fallback")
-    m["mpc_fallbacks"] = int(np.sum(fb)) if fb is not None else 0
-    m["missing_steps"] = missing_steps(run)
-    m["stray_messages"] = dict(getattr(run, "strays", {}))  # off the timeline, not scored
-    # What each node rejected (inputs, stamps, caught errors), from /diagnostics; only the
-    # nodes that rejected something. Absent from bags recorded before /diagnostics existed.
-    m["input_rejections"] = {n: {k: v for k, v in c.items() if v}
-                             for n, c in sorted(getattr(run, "rejections", {}).items())
-                             if any(c.values())}
-    lat = step_latencies_ms(run)
-    if lat:
-        m["step_latency_ms"] = lat
-    return m
-
-
-LATENCY_STAGES = (
-    # name, from topic, to topic, to the next step's stamp
-    ("state_to_mpc_command", "state", "mpc_command", False),
-    ("state_to_drive_command", "state", "drive_command", False),
-    ("mpc_command_to_wheel_torques", "mpc_command", "wheel_torques", False),
-    ("wheel_torques_to_next_state", "wheel_torques", "state", True),
-    ("step", "state", "state", True),
-)
-
-
-def step_latencies_ms(run) -> dict[str, dict[str, float]]:
-    """Where each step's wall time goes, from the recorder's receive times (``log_ns``):
-    per stage of the lockstep chain (state → MPC command → wheel torques → next state), the
-    median and 90th percentile in ms over the steps that have both ends. The recorder's own
-    delivery delay cancels in each difference up to its jitter. Empty for a bag without
-    receive times or with fewer than two steps."""
-    import numpy as np
-
-    out: dict[str, dict[str, float]] = {}
-    for name, src, dst, next_step in LATENCY_STAGES:
-        a, b = getattr(run, src), getattr(run, dst)
-        if len(a.get("log_ns", ())) < 2 or len(b.get("log_ns", ())) < 2:
-            continue
-        stamps_a = np.asarray(a["stamp_ns"], dtype=np.int64)
-        want = stamps_a[1:] if next_step else stamps_a
-        start = a["log_ns"][:-1] if next_step else a["log_ns"]
-        idx = np.searchsorted(b["stamp_ns"], want)
-        ok = idx < len(b["stamp_ns"])
-        ok[ok] = b["stamp_ns"][idx[ok]] == want[ok]
-        d = (b["log_ns"][idx[ok]] - start[ok]) * 1e-6
-        if len(d):
-            out[name] = {"p50": float(np.median(d)), "p90": float(np.percentile(d, 90))}
-    return out
-
-
-def missing_steps(run) -> int:
-    """Step stamps absent from the bag: on the state's period grid between its first and
-    last stamp, the largest count missing from any per-step topic, and at least the states
-    the plant's final status counts but the bag lacks (0 for a complete record).
-
-    A recorder that fell behind its subscriptions' queues loses messages without an error;
-    this finds the gap from the data alone, for any bag (also recovered ones).
-    """
-    import numpy as np
-
-    stamps = np.asarray(run.state["stamp_ns"], dtype=np.int64)
-    if len(stamps) < 2:
-        return 0
-    period = int(np.median(np.diff(stamps)))
-    if period <= 0:
-        return 0
-    grid = stamps[0] + period * np.arange(int(round((stamps[-1] - stamps[0]) / period)) + 1)
-    worst = int(np.sum(~np.isin(grid, stamps)))
-    # Commands exist for every state but the last (its answer may still be in flight).
-    for topic in (run.mpc_command, run.mpc_diagnostics, run.drive_command, run.wheel_torques):
-        if len(topic["stamp_ns"]):
-            worst = max(worst, int(np.sum(~np.isin(grid[:-1], topic["stamp_ns"]))))
-    # The plant's own count (its final status): states 0..steps, so a recording that began
-    # late or ended early is missing steps too, not only one with holes in between.
-    steps = (run.status or {}).get("steps")
-    if isinstance(steps, int) and (run.status or {}).get("state") == "ended":
-        worst = max(worst, steps + 1 - len(stamps))
-    return max(worst, 0)
-
-
-def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
-                  mode: str = "lockstep", plots: bool = True, progress: bool = True,
-                  compose: str = "none") -> dict:
-    """``fourws run``: one run over topics, then metrics.json and plots from its bag.
-
-    ``compose``: the process layout (:func:`fourws_bringup.runner.graph_specs`), recorded in
-    metrics.json; it changes the timing only, never a recorded value.
-    """
-    from fourws_sim.core.scenario import load_scenario
-
-    from .runner import controller_preset
-
-    controller_preset(controller)
-    try:
-        sc = load_scenario(scenario)
-    except (ValueError, FileNotFoundError) as exc:
-        why = str(exc).removeprefix(f"{Path(scenario)}: ")  # the file is named once
-        raise RunError(f"scenario '{scenario}': {why}") from exc
-    prepare_out_dir(out_dir, force)
-    print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
-    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
-                        compose=compose)
-    try:
-        metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
-    except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
-        metrics = {"scenario": sc.name, "controller": controller, "completed": False,
-                   "reason": f"{outcome.reason}; metrics failed: {exc}",
-                   "wall_time_s": outcome.wall_time_s, "exit_code": int(ExitCode.ERROR)}
-        if outcome.died:
-            metrics["died"] = outcome.died
-            metrics["died_error"] = outcome.died_error
-    metrics["compose"] = compose
-    write_metrics(out_dir, metrics)
-    if plots and (out_dir / "bag").exists():
-        try:
-            from .bag import read_run
-            from .report import draw_figures
-
-            draw_figures(read_run(out_dir), out_dir / "plots")
-        except Exception as exc:  # noqa: BLE001
-            print(f"[fourws] figures failed: {exc}", file=sys.stderr)
-    return metrics
-
-
-def report_path(path: Path, out: Path | None = None) -> dict:
-    """``fourws report``: metrics.json and figures recomputed from a bag or run folder.
-
-    A ``RunError`` (before the bag is read) when ``out`` cannot be written.
-    """
-    from .bag import read_run
-    from .report import draw_figures
-    from .runner import writable_dir
-
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such bag or run folder")
-    out = out or (path if (path / "bag").is_dir() else path.parent)
-    writable_dir(out)
-    metrics = score_run(path)
-    write_metrics(out, metrics)
-    draw_figures(read_run(path), out / "plots")
-    return metrics
 
 
 def _fmt(v) -> str:
@@ -380,7 +126,8 @@ def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
     """A paragraph on Table 8's allocation step from the bag of ``improved@dlc_60_mu05``
     under ``out`` (``report.allocation_audit`` against rule-based allocation); empty when
     that run is not among ``results``; says why when its bag cannot be audited."""
-    from .bag import BagError, read_run
+    from .bag.errors import BagError
+    from .bag.run_data import read_run
     from .report import allocation_audit
 
     key = ("improved", "dlc_60_mu05")
@@ -470,17 +217,4 @@ def paper_folder_problem(folder: Path) -> str | None:
             return f"{p.name}/ is not a run folder: {why}"
     if not any(p.name == "report.md" or "@" in p.name for p in entries):
         return "it has no report.md and no run folder"
-    return None
-
-
-def run_failure(m: dict) -> str | None:
-    """Why a run gives no trustworthy result, or None. A run the scenario aborted (the car
-    left the ±5 m corridor, as MPC-FWS does on this plant) is a result, not a failure; a node
-    that died, metrics that could not be computed, or steps missing from the bag are."""
-    if m.get("died"):
-        return f"node {m['died']} died"
-    if "steps" not in m:
-        return m.get("reason", "no metrics")
-    if m.get("missing_steps"):
-        return f"{m['missing_steps']} steps missing from the bag"
     return None

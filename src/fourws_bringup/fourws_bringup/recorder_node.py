@@ -3,7 +3,7 @@
 Subscribes to each topic in ``topics`` with ``raw=True`` (no decode, no re-encode) and the QoS
 its publisher offers (``fourws_common.qos``: CONTROL_QOS per step, LATCHED_QOS for
 ``/reference/*`` and ``/run/status``, CLOCK_QOS for ``/clock``), and appends every message to
-``output_dir`` through :class:`fourws_bringup.bag.BagWriter`: ``log_time`` = wall receive
+``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`: ``log_time`` = wall receive
 time (ns), ``publish_time`` = header stamp (receive time for ``/run/status``).
 
 Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
@@ -45,18 +45,19 @@ from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 
 from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
+from fourws_common.qos import PROFILES, dict_from_profile, profile_from_dict
 from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import DEFAULT_TOPICS, TOPICS, TopicInfo, qos_kind, topic_info
 
-from .bag import DEFAULT_TOPICS, TOPICS, BagError, BagWriter, TopicInfo, cdr_stamp_ns, topic_info
+from .bag.errors import BagError
+from .bag.schema import cdr_stamp_ns
+from .bag.writer import BagWriter
 
-KIND_QOS = {"control": CONTROL_QOS, "latched": LATCHED_QOS, "clock": CLOCK_QOS,
-            "diagnostics": DIAGNOSTICS_QOS}
 #: QoS kinds of the graph's topics that carry one message per step, stamped with the step.
 PER_STEP_KINDS = ("control", "clock")
 
@@ -156,29 +157,16 @@ class RecorderConfig:
                              f"drain_max_s ({self.drain_max_s})")
 
 
+def graph_kind(info: TopicInfo) -> str | None:
+    """The QoS kind of a graph topic recorded with its graph type, else None."""
+    topic = TOPICS.get(info.name)
+    return topic.qos if topic is not None and topic.type == info.type else None
+
+
 def qos_of(info: TopicInfo) -> QoSProfile:
     """The rclpy profile to subscribe a topic with: the graph's own profile when known."""
-    if info.name in TOPICS and TOPICS[info.name][0] == info.type:
-        return KIND_QOS[TOPICS[info.name][1]]
-    q = info.qos
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_ALL if q["history"] == "keep_all" else HistoryPolicy.KEEP_LAST,
-        depth=int(q["depth"]),
-        reliability=(ReliabilityPolicy.BEST_EFFORT if q["reliability"] == "best_effort"
-                     else ReliabilityPolicy.RELIABLE),
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if q["durability"] == "transient_local"
-                    else DurabilityPolicy.VOLATILE))
-
-
-def qos_dict(profile: QoSProfile) -> dict:
-    """``history, depth, reliability, durability`` names of an rclpy profile (for the bag)."""
-    return {"history": "keep_all" if profile.history == HistoryPolicy.KEEP_ALL else "keep_last",
-            "depth": int(profile.depth),
-            "reliability": ("best_effort" if profile.reliability == ReliabilityPolicy.BEST_EFFORT
-                            else "reliable"),
-            "durability": ("transient_local"
-                           if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                           else "volatile")}
+    kind = graph_kind(info)
+    return PROFILES[kind] if kind is not None else profile_from_dict(info.qos)
 
 
 def message_class(type_name: str):
@@ -220,7 +208,7 @@ class RecorderNode(Node):
         profiles = {}
         for i, info in enumerate(infos):
             profiles[info.name] = qos_of(info)
-            infos[i] = TopicInfo(info.name, info.type, qos_dict(profiles[info.name]))
+            infos[i] = TopicInfo(info.name, info.type, dict_from_profile(profiles[info.name]))
         classes = {info.name: message_class(info.type) for info in infos}
         try:
             self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
@@ -232,14 +220,13 @@ class RecorderNode(Node):
         self._last_rx = time.monotonic()
         self.lost: dict[str, int] = {}  # DDS's message-lost totals
         self.gaps = {i.name: StampGaps() for i in infos
-                     if TOPICS.get(i.name, ("", ""))[1] in PER_STEP_KINDS
-                     and TOPICS[i.name][0] == i.type and self.writer.stamped(i.name)}
+                     if graph_kind(i) in PER_STEP_KINDS and self.writer.stamped(i.name)}
         self.matched: dict[str, int] = {}
         gate = cfg.start_gate_topic
         if gate and gate not in names:
             raise ValueError(f"start_gate_topic: {gate} is not among the recorded topics")
         self._gate_waits = [i.name for i in infos if i.name != gate
-                            and TOPICS.get(i.name, ("", "control"))[1] == "control"]
+                            and qos_kind(i.name) == "control"]
         self._pending_gate = next((i for i in infos if i.name == gate), None)
         self._profiles, self._classes = profiles, classes
         self._started_at = time.monotonic()

@@ -9,7 +9,7 @@ Timing: with ``pacing: stamp`` a message is due at ``t0 + (s - s0) / rate``, ``s
 largest header stamp so far (simulated time, so ``rate: 1`` is real time); with
 ``pacing: recorded`` the recorded receive times are used instead. ``rate: 0`` publishes as
 fast as possible: a subscriber slower than that loses the oldest messages beyond its KEEP_LAST
-depth (100 on the graph's topics), as with ``ros2 bag play``; use ``lockstep_topic`` to replay
+depth (1000 on the per-step topics), as with ``ros2 bag play``; use ``lockstep_topic`` to replay
 at the pace of a controller instead.
 
 Lockstep (``lockstep_topic``, e.g. ``/control/mpc_command``): after publishing a
@@ -34,17 +34,19 @@ from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from fourws_common.conversions import ns_to_stamp
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CLOCK_QOS, CONTROL_QOS
+from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, PROFILES, profile_from_dict
 from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import CLOCK, RUN_STATUS, TOPICS, VEHICLE_STATE, qos_kind
 
-from .bag import TOPICS, BagError, McapBag, cdr_stamp_ns, first_field_is_stamp
-from .recorder_node import KIND_QOS, message_class
+from .bag.errors import BagError
+from .bag.reader import McapBag
+from .bag.schema import cdr_stamp_ns, first_field_is_stamp
+from .recorder_node import message_class
 
 BATCH = 500  # most messages published in one timer tick
 
@@ -59,7 +61,7 @@ class ReplayConfig:
     publish_clock: bool = param(True, "publish /clock from the header stamps")
     lockstep_topic: str = param("", "after each trigger message stamped k, wait for a message "
                                 "stamped k on this topic ('' = off)")
-    lockstep_trigger: str = param("/vehicle/state", "topic whose messages wait for the "
+    lockstep_trigger: str = param(VEHICLE_STATE.name, "topic whose messages wait for the "
                                   "lockstep answer")
     lockstep_timeout_s: float = param(10.0, "lockstep: go on after this wall time without an "
                                       "answer (logged)", lo=0.01, hi=3600.0, unit="s")
@@ -77,21 +79,9 @@ class ReplayConfig:
             raise ValueError("bag: must be set to a bag folder, run folder or .mcap file")
 
 
-def qos_profile(q: dict | None, fallback: QoSProfile) -> QoSProfile:
-    """rclpy profile from a recorded offered-QoS dict (see bag.parse_offered_qos)."""
-    if not q:
-        return fallback
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_ALL if q["history"] == "keep_all" else HistoryPolicy.KEEP_LAST,
-        depth=max(1, int(q["depth"])),
-        reliability=(ReliabilityPolicy.BEST_EFFORT if q["reliability"] == "best_effort"
-                     else ReliabilityPolicy.RELIABLE),
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if q["durability"] == "transient_local"
-                    else DurabilityPolicy.VOLATILE))
-
-
 class ReplayNode(Node):
-    """Reads the bag lazily (fourws_bringup.bag.McapBag) and publishes on a 1 ms timer."""
+    """Reads the bag lazily (fourws_bringup.bag.reader.McapBag) and publishes on a 1 ms
+    timer."""
 
     def __init__(self) -> None:
         super().__init__("replay_node")
@@ -116,24 +106,24 @@ class ReplayNode(Node):
                                  f"{', '.join(sorted(recorded))})")
             self.topics = list(dict.fromkeys(topics_param))
         else:
-            self.topics = [t for t in recorded if t not in ("/clock", "/run/status")]
+            self.topics = [t for t in recorded if t not in (CLOCK.name, RUN_STATUS.name)]
         self.pubs = {}
         self.stamped: dict[str, bool] = {}
         for t in self.topics:
             ch = recorded[t]
-            fallback = KIND_QOS[TOPICS[t][1]] if t in TOPICS else CONTROL_QOS
-            self.pubs[t] = self.create_publisher(message_class(ch.type), t,
-                                                 qos_profile(ch.qos, fallback))
+            # the offered QoS as recorded; the table's for a channel without one
+            qos = profile_from_dict(ch.qos) if ch.qos else PROFILES[qos_kind(t)]
+            self.pubs[t] = self.create_publisher(message_class(ch.type), t, qos)
             self.stamped[t] = first_field_is_stamp(ch.definition)
         self.clock_pub = None
-        if cfg.publish_clock and "/clock" not in self.topics:
-            self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        if cfg.publish_clock and CLOCK.name not in self.topics:
+            self.clock_pub = self.create_publisher(Clock, CLOCK.name, CLOCK_QOS)
         self.lockstep = bool(cfg.lockstep_topic)
         self.answered: set[int] = set()
         self.lockstep_misses = 0
         if self.lockstep:
-            ltype = (recorded[cfg.lockstep_topic].type if cfg.lockstep_topic in recorded
-                     else TOPICS.get(cfg.lockstep_topic, (None,))[0])
+            known = recorded.get(cfg.lockstep_topic) or TOPICS.get(cfg.lockstep_topic)
+            ltype = known.type if known is not None else None
             if ltype is None:
                 raise ValueError(f"lockstep_topic: type of {cfg.lockstep_topic} unknown (not in "
                                  "the bag nor a graph topic)")

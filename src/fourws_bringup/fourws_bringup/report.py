@@ -27,44 +27,20 @@ from typing import Any
 
 import numpy as np
 
-from .bag import BagError, RunData
+from fourws_common.topics import DRIVE_COMMAND, MPC_COMMAND, VEHICLE_STATE, WHEEL_TORQUES
+from fourws_common.wheels import Wheel
 
-WHEELS = ("FL", "FR", "RL", "RR")
+from .bag.errors import BagError
+from .bag.run_data import RunData
+from .scoring import recorded_reference
+
+WHEELS = tuple(w.name for w in Wheel)  # FL FR RL RR
 PAPER_WEIGHT_MAXIMA = {"q_y": 8000.0, "q_phi": 5000.0, "r_ddelta": 80000.0, "r_dmz": 60000.0}
 
 
 # ---------------------------------------------------------------------------------------------
 # Quantities
 # ---------------------------------------------------------------------------------------------
-def reference_of(run: RunData):
-    """The run's recorded reference path as a ``fourws_mpc`` Reference, or None."""
-    from .core.metrics import reference_from_arrays
-
-    r = run.reference
-    if not r or len(r.get("x", ())) < 2:
-        return None
-    return reference_from_arrays(r["x"], r["y"], r["yaw"], r.get("curvature"), r.get("speed"))
-
-
-def metrics_from_run(run: RunData) -> dict[str, float]:
-    """``core.metrics.run_metrics`` of a recorded run: the metrics.json numbers (plus
-    ``steps`` and ``sim_time_s``), from the recorded states, reference and solve times.
-
-    Raises :class:`BagError` when the bag holds no state or no reference.
-    """
-    from .core.metrics import run_metrics
-
-    s = run.state
-    if not len(s["stamp_ns"]):
-        raise BagError(f"{run.path}: no /vehicle/state messages")
-    ref = reference_of(run)
-    if ref is None:
-        raise BagError(f"{run.path}: no /reference/trajectory message; errors need the path")
-    solve = run.mpc_diagnostics.get("solve_time_ms")
-    return run_metrics(ref, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"], s["vy"],
-                       s["sideslip"], solve)
-
-
 @dataclass
 class Series:
     """What the figures show of one run (SI, radians)."""
@@ -91,7 +67,7 @@ def series_of(run: RunData) -> Series:
     s = run.state
     if not len(s["stamp_ns"]):
         raise BagError(f"{run.path}: no /vehicle/state messages; nothing to plot")
-    ref = reference_of(run)
+    ref = recorded_reference(run)
     yaw = np.unwrap(s["yaw"])
     if ref is not None:
         n = len(s["x"])
@@ -135,15 +111,15 @@ def allocation_audit(run: RunData, other: str = "rule", cfg=None) -> dict[str, A
     ``cfg`` (geometry and limits; the method is the recorded one) defaults to the package's
     ``allocator.yaml``. Raises :class:`BagError` when the bag lacks a topic the audit needs.
     """
-    from .core.closed_loop import load_allocator_config
+    from .core.configs import load_allocator_config
     from .core.metrics import allocate_series, rear_load_ratio_share, tyre_usage
 
     cfg = cfg or load_allocator_config(None)
     s, d, c, w = run.state, run.drive_command, run.mpc_command, run.wheel_torques
-    for topic, cols, key in (("/vehicle/state", s, "fz"), ("/control/drive_command", d, "torque"),
-                             ("/control/mpc_command", c, "yaw_moment"),
-                             ("/control/wheel_torques", w, "torque"),
-                             ("/control/wheel_torques", w, "allocation")):
+    for topic, cols, key in ((VEHICLE_STATE.name, s, "fz"), (DRIVE_COMMAND.name, d, "torque"),
+                             (MPC_COMMAND.name, c, "yaw_moment"),
+                             (WHEEL_TORQUES.name, w, "torque"),
+                             (WHEEL_TORQUES.name, w, "allocation")):
         if not len(cols.get("stamp_ns", ())) or key not in cols:
             raise BagError(f"{run.path}: no {topic} messages; the allocation audit needs them")
     stamps = w["stamp_ns"]

@@ -13,7 +13,7 @@ def _num(v, fmt: str) -> str:
 def write_report(out: Path, results: dict[tuple[str, str], dict], tables: str,
                  wall_s: float) -> Path:
     """Tables, comparison figures per scenario (overlaying the controllers) and a run table."""
-    from .bag import read_run
+    from .bag.run_data import read_run
     from .report import draw_comparison
 
     figs: dict[str, list[Path]] = {}

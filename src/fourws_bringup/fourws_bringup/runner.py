@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
+from fourws_common.topics import RUN_STATUS, VEHICLE_STATE
 
 from .core.configs import controller_preset_path, params_files
 from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
@@ -182,7 +183,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
         specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
                               params_files=files("recorder_node"),
                               parameters={"output_dir": str(bag_dir),
-                                          "start_gate_topic": "/vehicle/state",
+                                          "start_gate_topic": VEHICLE_STATE.name,
                                           "use_sim_time": use_sim_time},
                               nice=RECORDER_NICE))
     return specs
@@ -247,7 +248,7 @@ class _Monitor:
         self.wall_time_s: float | None = None  # the plant's, from its first answered state
         self.ended_wall: float | None = None
         self.status: dict = {}
-        self.node.create_subscription(String, "/run/status", self._on_status, LATCHED_QOS)
+        self.node.create_subscription(String, RUN_STATUS.name, self._on_status, LATCHED_QOS)
         from rclpy.experimental import EventsExecutor
 
         self.ex = EventsExecutor(context=self.ctx)

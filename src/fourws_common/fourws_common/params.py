@@ -5,6 +5,10 @@ Every core's configuration is a frozen dataclass whose fields are declared with
 description. Nodes turn the same metadata into ROS parameter descriptors with ranges
 (``fourws_common.ros_params``), so a value is checked by one rule whether it comes from
 YAML, the command line or a runtime ``set_parameters`` call.
+
+Files: :func:`read_yaml_file` is the one YAML-file reader (params files, vehicle.yaml,
+scenarios), with errors that name the file and the line; :func:`load_ros_params_yaml` picks
+a node's section of a ROS 2 params file.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
+from os import PathLike
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -96,16 +101,44 @@ def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True
     return cls(**kwargs)
 
 
-def load_ros_params_yaml(path: str, node_name: str) -> dict[str, Any]:
-    """Read ``node_name: ros__parameters: {...}`` from a ROS 2 params file.
+def read_yaml_file(path: str | PathLike[str]) -> Any:
+    """The YAML content of a file: the one reader of params files, vehicle.yaml and scenarios.
 
-    Accepts the node name with or without a leading slash and the ``/**`` wildcard;
-    later sections override earlier ones as in rcl.
+    Raises ``ValueError`` naming the file (and, for a syntax error, its line and column, on
+    one line) when it cannot be read or parsed.
     """
     import yaml
 
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh) or {}
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return yaml.safe_load(fh)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        context = getattr(exc, "context", None)
+        cmark = getattr(exc, "context_mark", None)
+        if context and cmark is not None:
+            context += f" from line {cmark.line + 1}"
+        what = f"{problem} ({context})" if context else problem
+        what = " ".join(str(what).split())  # one line
+        raise ValueError(f"{path}: YAML syntax error{where}: {what}") from None
+
+
+def load_ros_params_yaml(path: str | PathLike[str], node_name: str) -> dict[str, Any]:
+    """Read ``node_name: ros__parameters: {...}`` from a ROS 2 params file.
+
+    Accepts the node name with or without a leading slash and the ``/**`` wildcard;
+    later sections override earlier ones as in rcl. Raises ``ValueError`` naming the file
+    when it cannot be read (:func:`read_yaml_file`) or is not a mapping.
+    """
+    data = read_yaml_file(path) or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{path}: expected a mapping at the top level")
     out: dict[str, Any] = {}
     for key in ("/**", node_name.lstrip("/"), "/" + node_name.lstrip("/")):
         section = data.get(key)

@@ -1,21 +1,66 @@
 """Nearest point on a sampled path, with a moving search window (pure numpy).
 
-Given path samples (x_i, y_i) in increasing arc length, :class:`PathIndex` returns the index
-of the sample nearest to a position, searching a window around the previous answer so the
-cost per call is constant; a full search is done on the first call and whenever the window
-answer lies on its edge. Used by the speed controller for the reference speed; the MPC has its
-own projection in ``fourws_mpc.core.reference``.
+:func:`windowed_search` is the one search of the project for the point of a path nearest to
+a position; what is measured is its caller's (``best``). With the previous answer ``hint``
+it searches the window [hint − back, hint + ahead) of the n candidates (clipped to [0, n));
+with no hint (the first call), or when the window's best lies on an edge of the window that
+is not an end of the path, it searches all n. Its answer is therefore the full search's
+whenever the nearest candidate moves by less than the window between calls, which holds
+unless the path comes back near itself.
+
+Its users, each with its own measure and window:
+
+* :class:`PathIndex`: the nearest *sample* (squared distance, :func:`nearest_sample`; the
+  first of equal distances, as ``np.argmin``), ``window`` samples either side (200): the
+  speed controller's reference speed (:class:`SpeedProfile`) and the plant's abort check
+  (``fourws_sim.core.scenario.Scenario.check_end``);
+* ``fourws_mpc.core.reference.Reference.nearest``: the nearest *segment* (projection on each
+  segment), ``ref_search_back`` segments behind and ``ref_search_ahead`` ahead;
+* :func:`nearest_sample` alone is the full search (the scenario's on-path start,
+  ``fourws_sim.core.paths.lateral_error`` without an index).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 
 from fourws_common.input_guard import REF_POSITION_MAX_M, REF_SPEED_MAX_MPS
 
+Found = TypeVar("Found", bound=tuple)
+
+
+def windowed_search(best: Callable[[int, int], Found], n: int, hint: int | None, back: int,
+                    ahead: int) -> Found:
+    """The nearest of ``n`` candidates (samples or segments) by ``best``, searching around
+    ``hint``; see the module docstring.
+
+    ``best(lo, hi)`` measures the candidates lo..hi−1 and returns a tuple whose first item is
+    the index (in 0..n−1) of the best of them; that tuple is returned.
+    """
+    if hint is not None:
+        lo = max(0, hint - back)
+        hi = min(n, hint + ahead)
+        found = best(lo, hi)
+        i = found[0]
+        if not ((i == lo and lo > 0) or (i == hi - 1 and hi < n)):
+            return found
+    return best(0, n)
+
+
+def nearest_sample(x: np.ndarray, y: np.ndarray, px: float, py: float, lo: int = 0,
+                   hi: int | None = None) -> int:
+    """Index of the sample of ``x[lo:hi]``, ``y[lo:hi]`` nearest to (px, py) (the first of
+    equal distances); all samples by default."""
+    d2 = (x[lo:hi] - px) ** 2 + (y[lo:hi] - py) ** 2
+    return lo + int(np.argmin(d2))
+
 
 class PathIndex:
-    """Nearest-sample lookup on a path; ``x``, ``y`` shape (N,), m."""
+    """Nearest-sample lookup on a path that remembers its last answer; ``x``, ``y`` shape
+    (N,), m; :func:`windowed_search` with ``window`` samples either side."""
 
     def __init__(self, x: np.ndarray, y: np.ndarray, window: int = 200) -> None:
         self.x = np.asarray(x, dtype=float)
@@ -31,19 +76,12 @@ class PathIndex:
         self._last: int | None = None
 
     def nearest(self, px: float, py: float) -> int:
-        """Index of the sample nearest to (px, py)."""
-        n = self.x.size
-        if self._last is not None:
-            lo = max(0, self._last - self.window)
-            hi = min(n, self._last + self.window + 1)
-            d2 = (self.x[lo:hi] - px) ** 2 + (self.y[lo:hi] - py) ** 2
-            i = lo + int(np.argmin(d2))
-            if (i > lo or lo == 0) and (i < hi - 1 or hi == n):
-                self._last = i
-                return i
-        d2 = (self.x - px) ** 2 + (self.y - py) ** 2
-        self._last = int(np.argmin(d2))
-        return self._last
+        """Index of the sample nearest to (px, py) (a full search on the first call)."""
+        x, y = self.x, self.y
+        (i,) = windowed_search(lambda lo, hi: (nearest_sample(x, y, px, py, lo, hi),),
+                               x.size, self._last, self.window, self.window + 1)
+        self._last = i
+        return i
 
 
 class SpeedProfile:

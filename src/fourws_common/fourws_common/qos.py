@@ -1,49 +1,51 @@
-"""Named QoS profiles of the fourws graph, one reason each."""
+"""rclpy QoS profiles of the fourws graph, built from the QoS kinds of ``fourws_common.topics``.
+
+The values and the reason of each kind are in that table; this module only turns them into
+``QoSProfile`` objects (``CONTROL_QOS``, ``LATCHED_QOS``, ``CLOCK_QOS``, ``LATEST_QOS`` --
+subscriber side -- and ``DIAGNOSTICS_QOS``), and converts between a profile and the plain
+``history, depth, reliability, durability`` values a bag records (:func:`profile_from_dict`,
+:func:`dict_from_profile`), for the recorder and the replay.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-# Per-step control and state traffic: reliable so lockstep never loses a step; a deep queue
-# (10 s of steps) so a subscriber starved of CPU for a while (the recorder, with six processes
-# on two cores at several times real time) catches up instead of dropping: at depth 100 the
-# recorder lost up to 10 % of the steps of a run under load. Loss is still detected from the
-# bag (``missing_steps`` in metrics.json) and logged by the recorder.
-CONTROL_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+from fourws_common.topics import QOS_KINDS
 
-# Reference trajectory and path: published once; late joiners (the recorder, rviz) must get it.
-LATCHED_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
 
-# /clock: reliable in lockstep so sim-time users see every tick; depth as the control traffic.
-CLOCK_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def profile_from_dict(q: Mapping[str, Any]) -> QoSProfile:
+    """rclpy profile from ``history, depth, reliability, durability`` names (rosbag2's; see
+    ``fourws_bringup.bag.metadata.parse_offered_qos``). A depth below 1 becomes 1."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if q["history"] == "keep_all" else HistoryPolicy.KEEP_LAST,
+        depth=max(1, int(q["depth"])),
+        reliability=(ReliabilityPolicy.BEST_EFFORT if q["reliability"] == "best_effort"
+                     else ReliabilityPolicy.RELIABLE),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if q["durability"] == "transient_local"
+                    else DurabilityPolicy.VOLATILE))
 
-# Controllers' view of the vehicle state: only the newest matters. Keep-last 1 means a node
-# that fell behind (a stalled MPC in realtime) takes the newest state, not a backlog of old
-# ones; in lockstep one state is in flight at a time, so nothing is lost.
-LATEST_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
 
-# /diagnostics: as diagnostic_updater publishes it (reliable, volatile), a queue of 10.
-DIAGNOSTICS_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=10,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def dict_from_profile(profile: QoSProfile) -> dict[str, Any]:
+    """``history, depth, reliability, durability`` names of an rclpy profile (for the bag)."""
+    return {"history": "keep_all" if profile.history == HistoryPolicy.KEEP_ALL else "keep_last",
+            "depth": int(profile.depth),
+            "reliability": ("best_effort" if profile.reliability == ReliabilityPolicy.BEST_EFFORT
+                            else "reliable"),
+            "durability": ("transient_local"
+                           if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                           else "volatile")}
+
+
+#: One rclpy profile per QoS kind of the table (``fourws_common.topics.QOS_KINDS``).
+PROFILES: dict[str, QoSProfile] = {name: profile_from_dict(kind.as_dict())
+                                   for name, kind in QOS_KINDS.items()}
+
+CONTROL_QOS = PROFILES["control"]
+LATCHED_QOS = PROFILES["latched"]
+CLOCK_QOS = PROFILES["clock"]
+LATEST_QOS = PROFILES["latest"]
+DIAGNOSTICS_QOS = PROFILES["diagnostics"]

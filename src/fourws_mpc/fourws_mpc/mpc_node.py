@@ -99,10 +99,7 @@ class MpcNode(Node):
                                f"'{cfg.controller}' (state kept)")
 
     def _reference(self, msg: ReferenceTrajectory) -> Reference:
-        cfg = self.params.config
-        return Reference.from_arrays(msg.x, msg.y, msg.yaw, msg.curvature, msg.speed,
-                                     search_back=cfg.ref_search_back,
-                                     search_ahead=cfg.ref_search_ahead)
+        return self.params.config.reference(msg.x, msg.y, msg.yaw, msg.curvature, msg.speed)
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:

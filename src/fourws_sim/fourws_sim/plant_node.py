@@ -67,6 +67,16 @@ from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
 from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import (
+    CLOCK,
+    MPC_COMMAND,
+    REFERENCE_PATH,
+    REFERENCE_TRAJECTORY,
+    RUN_STATUS,
+    VEHICLE_ODOM,
+    VEHICLE_STATE,
+    WHEEL_TORQUES,
+)
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
 from fourws_sim.core.scenario import load_scenario
 from fourws_sim.core.simulator import Simulator
@@ -153,13 +163,13 @@ class PlantNode(Node):
         self.clip_log = RateLimitedLog(log.warning)
         self.late_log = RateLimitedLog(log.warning)
 
-        self.pub_state = self.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
-        self.pub_odom = self.create_publisher(Odometry, "/vehicle/odom", CONTROL_QOS)
-        self.pub_clock = self.create_publisher(Clock, "/clock", CLOCK_QOS)
-        self.pub_ref = self.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+        self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.name, CONTROL_QOS)
+        self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.name, CONTROL_QOS)
+        self.pub_clock = self.create_publisher(Clock, CLOCK.name, CLOCK_QOS)
+        self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                              LATCHED_QOS)
-        self.pub_path = self.create_publisher(Path, "/reference/path", LATCHED_QOS)
-        self.pub_status = self.create_publisher(String, "/run/status", LATCHED_QOS)
+        self.pub_path = self.create_publisher(Path, REFERENCE_PATH.name, LATCHED_QOS)
+        self.pub_status = self.create_publisher(String, RUN_STATUS.name, LATCHED_QOS)
         # Per-step messages are built once and refilled: every field is set before each
         # publish (which serialises at once), and Odometry's constructor alone costs ~40 µs.
         self._state_msg = VehicleState()
@@ -168,8 +178,8 @@ class PlantNode(Node):
         self._odom_msg = Odometry()
         self._odom_msg.header = self._state_msg.header
         self._odom_msg.child_frame_id = "base_link"
-        self.create_subscription(MpcCommand, "/control/mpc_command", self._on_mpc, CONTROL_QOS)
-        self.create_subscription(WheelTorques, "/control/wheel_torques", self._on_torques,
+        self.create_subscription(MpcCommand, MPC_COMMAND.name, self._on_mpc, CONTROL_QOS)
+        self.create_subscription(WheelTorques, WHEEL_TORQUES.name, self._on_torques,
                                  CONTROL_QOS)
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
@@ -361,8 +371,8 @@ class PlantNode(Node):
         if cfg.mode == "realtime":
             return
         if now - self.last_progress > cfg.command_timeout_s:
-            missing = [name for name, held in (("/control/mpc_command", self.pending_cmd),
-                                               ("/control/wheel_torques", self.pending_torque))
+            missing = [name for name, held in ((MPC_COMMAND.name, self.pending_cmd),
+                                               (WHEEL_TORQUES.name, self.pending_torque))
                        if held is None]
             self._finish(False, f"no {' and '.join(missing)} for step {self.step_k} within "
                          f"{cfg.command_timeout_s:.1f} s", ExitCode.TIMEOUT)

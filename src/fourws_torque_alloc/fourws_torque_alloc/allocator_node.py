@@ -36,6 +36,13 @@ from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import (
+    DRIVE_COMMAND,
+    MPC_COMMAND,
+    REFERENCE_TRAJECTORY,
+    VEHICLE_STATE,
+    WHEEL_TORQUES,
+)
 from fourws_msgs.msg import (
     DriveCommand,
     MpcCommand,
@@ -74,17 +81,17 @@ class AllocatorNode(Node):
         self.last_valid = np.zeros(4)
         self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
         self.health = NodeHealth(self)
-        self.pub = self.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
+        self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.name, CONTROL_QOS)
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
-        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
-                                 self.health.guard("/reference/trajectory", self._on_ref),
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+                                 self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state",
-                                 self.health.guard("/vehicle/state", self._on_state),
+        self.create_subscription(VehicleState, VEHICLE_STATE.name,
+                                 self.health.guard(VEHICLE_STATE.name, self._on_state),
                                  LATEST_QOS)
-        self.create_subscription(DriveCommand, "/control/drive_command",
+        self.create_subscription(DriveCommand, DRIVE_COMMAND.name,
                                  lambda m: self._on_input(self.drives, m), CONTROL_QOS)
-        self.create_subscription(MpcCommand, "/control/mpc_command",
+        self.create_subscription(MpcCommand, MPC_COMMAND.name,
                                  lambda m: self._on_input(self.mpcs, m), CONTROL_QOS)
         self.get_logger().info(f"allocation method '{self.params.config.method}'")
 

@@ -30,6 +30,7 @@ from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
 from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import DRIVE_COMMAND, REFERENCE_TRAJECTORY, VEHICLE_STATE
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
 from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
 
@@ -48,18 +49,18 @@ class SpeedPidNode(Node):
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
         self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
-        self.latest = LatestInput(self, self.health.guard("/vehicle/state", self._on_state),
+        self.latest = LatestInput(self, self.health.guard(VEHICLE_STATE.name, self._on_state),
                                   self.health)
         self.inputs = ParamBinding(self, InputConfig,
                                    on_change=lambda c: self.latest.set_sync(c.sync))
         self.latest.set_sync(self.inputs.config.sync)
-        self.pub = self.create_publisher(DriveCommand, "/control/drive_command", CONTROL_QOS)
+        self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.name, CONTROL_QOS)
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
-        self.create_subscription(ReferenceTrajectory, "/reference/trajectory",
-                                 self.health.guard("/reference/trajectory", self._on_ref),
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+                                 self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, "/vehicle/state",
-                                 self.health.guard("/vehicle/state", self.latest.offer),
+        self.create_subscription(VehicleState, VEHICLE_STATE.name,
+                                 self.health.guard(VEHICLE_STATE.name, self.latest.offer),
                                  LATEST_QOS)
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:

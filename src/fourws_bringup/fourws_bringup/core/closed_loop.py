@@ -38,7 +38,6 @@ from fourws_bringup.core.configs import (
 )
 from fourws_bringup.core.metrics import run_metrics
 from fourws_common.path_lookup import SpeedProfile
-from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_sim.core.scenario import Scenario, load_scenario
@@ -101,14 +100,6 @@ def with_plant_aborts(scenario: Scenario, plant: dict[str, Any]) -> Scenario:
         if "abort_sideslip_deg" in plant else scenario.abort_sideslip_rad)
 
 
-def reference_of(scenario: Scenario, cfg: MpcConfig | None = None) -> Reference:
-    """The scenario's path as the MPC's :class:`Reference` (the ReferenceTrajectory arrays)."""
-    p = scenario.path
-    kw = {} if cfg is None else {"search_back": cfg.ref_search_back,
-                                 "search_ahead": cfg.ref_search_ahead}
-    return Reference.from_arrays(p.x, p.y, p.yaw, p.curvature, p.speed, **kw)
-
-
 def run_closed_loop(
     scenario_name_or_path: str,
     controller_name: str,
@@ -132,7 +123,8 @@ def run_closed_loop(
     mpc = MpcController(mpc_cfg)
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
-    ref = reference_of(scenario, mpc_cfg)
+    p = scenario.path
+    ref = mpc_cfg.reference(p.x, p.y, p.yaw, p.curvature, p.speed)
     speed_ref = SpeedProfile(scenario.path.x, scenario.path.y, scenario.path.speed)
 
     st: dict[str, list] = {k: [] for k in STATE_FIELDS + WHEEL_FIELDS}

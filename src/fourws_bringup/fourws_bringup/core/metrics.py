@@ -1,4 +1,4 @@
-"""Tracking metrics of a run (the metrics.json keys of design.md), from per-step arrays.
+"""Tracking metrics of a run (the metrics.json keys of docs/architecture.md), from per-step arrays.
 
 Lateral and heading errors are measured against the reference path geometry by
 :func:`path_errors` — nearest point with projection between samples, signed lateral offset
@@ -28,8 +28,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fourws_common.wheels import Wheel
 from fourws_mpc.core.reference import Reference
-from fourws_torque_alloc.core.allocation import AllocatorConfig, WheelIndex, allocate
+from fourws_torque_alloc.core.allocation import AllocatorConfig, allocate
 
 METRIC_KEYS = (
     "max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
@@ -138,8 +139,8 @@ def rear_load_ratio_share(fz_n: np.ndarray, mu: np.ndarray) -> np.ndarray:
     the left and right side: c_r²/(c_f² + c_r²) with c_i = μ_i F_zi (NaN where both are 0)."""
     c = np.asarray(mu, float).reshape(-1, 4) * np.asarray(fz_n, float).reshape(-1, 4)
     c2 = c * c
-    front = c2[:, [WheelIndex.FL, WheelIndex.FR]]
-    rear = c2[:, [WheelIndex.RL, WheelIndex.RR]]
+    front = c2[:, [Wheel.FL, Wheel.FR]]
+    rear = c2[:, [Wheel.RL, Wheel.RR]]
     total = front + rear
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(total > 0.0, rear / total, np.nan)

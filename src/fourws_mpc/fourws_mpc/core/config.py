@@ -20,6 +20,7 @@ from fourws_common.params import from_mapping, param
 from fourws_mpc.core.apcha import ApchaParams
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
+from fourws_mpc.core.reference import Reference
 
 
 @dataclass(frozen=True)
@@ -116,9 +117,9 @@ class MpcConfig:
     yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", lo=1.0, hi=1e6, unit="kg*m^2")
     cg_to_front_axle_m: float = param(1.10, "CG to front axle a", lo=0.01, hi=10.0, unit="m")
     cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b", lo=0.01, hi=10.0, unit="m")
-    cornering_stiffness_front_n_per_rad: float = param(
+    cornering_stiffness_front_static_n_per_rad: float = param(
         27994.0, "per-tyre front cornering stiffness C_cf", lo=1.0, hi=1e7, unit="N/rad")
-    cornering_stiffness_rear_n_per_rad: float = param(
+    cornering_stiffness_rear_static_n_per_rad: float = param(
         29999.0, "per-tyre rear cornering stiffness C_cr", lo=1.0, hi=1e7, unit="N/rad")
     longitudinal_stiffness_front_n: float = param(50000.0, "per-tyre C_lf", lo=0.0, hi=1e7,
                                                   unit="N")
@@ -170,13 +171,21 @@ class MpcConfig:
         """Build and validate from a flat mapping (e.g. a merged ROS params file)."""
         return from_mapping(cls, values, strict=strict)
 
+    def reference(self, x, y, yaw, curvature, speed) -> Reference:
+        """The MPC's :class:`Reference` of path arrays (a ReferenceTrajectory's) with this
+        config's nearest-point window: the one way the node and the in-process loop build
+        it."""
+        return Reference.from_arrays(x, y, yaw, curvature, speed,
+                                     search_back=self.ref_search_back,
+                                     search_ahead=self.ref_search_ahead)
+
     def model_params(self) -> ModelParams:
         """Parameters of eq. (1) in SI."""
         return ModelParams(
             mass_kg=self.mass_kg, yaw_inertia_kg_m2=self.yaw_inertia_kg_m2,
             a_m=self.cg_to_front_axle_m, b_m=self.cg_to_rear_axle_m,
-            c_cf=self.cornering_stiffness_front_n_per_rad,
-            c_cr=self.cornering_stiffness_rear_n_per_rad,
+            c_cf=self.cornering_stiffness_front_static_n_per_rad,
+            c_cr=self.cornering_stiffness_rear_static_n_per_rad,
             c_lf=self.longitudinal_stiffness_front_n, c_lr=self.longitudinal_stiffness_rear_n,
             slip_front=self.slip_ratio_front, slip_rear=self.slip_ratio_rear,
             min_speed_mps=self.min_speed_mps)

@@ -5,7 +5,7 @@ of the path positive; e_φ = φ − φ_ref, CCW positive), each with five sets N
 Outputs: four ratios r ∈ [0, 1] (r_QY, r_Qφ, r_RΔδ, r_RΔMz) with sets ZO PS PM PB.
 
 Figure 3 is not legible in the text; it is read as evenly spaced triangles with shoulders at
-the universe ends (the usual reading, paper-notes):
+the universe ends (the usual reading; docs/mpc.md, "Fuzzy weights"):
 
     e_Y : NB (−3,−3,−1.5) NS (−3,−1.5,0) ZO (−1.5,0,1.5) PS (0,1.5,3) PB (1.5,3,3)   [m]
     e_φ : NB (−8,−8,−4)   NS (−8,−4,0)   ZO (−4,0,4)     PS (0,4,8)   PB (4,8,8)     [deg]

@@ -4,7 +4,8 @@ The reference comes as arrays x, y, yaw, curvature, speed at fine spacing (as in
 ReferenceTrajectory message); the arc length s is their cumulative chord length.
 
 Nearest point: every segment p_i → p_{i+1} in a window around the previous index (or all
-segments on the first call, or when the best lies on the window's edge) is projected on,
+segments on the first call, or when the best lies on the window's edge: the project's one
+windowed search, ``fourws_common.path_lookup.windowed_search``) is projected on,
 t = clip((p − p_i)·d / |d|², 0, 1); the closest projection wins. Beyond the first/last
 sample the projection continues along the end segments (t unclipped there), so s may leave
 [0, s_end]. Errors in the path frame at the projection::
@@ -32,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourws_common.input_guard import check_reference
+from fourws_common.path_lookup import windowed_search
 
 TWO_PI = 2.0 * math.pi
 
@@ -141,17 +143,12 @@ class Reference:
         return i, tk, off
 
     def nearest(self, px: float, py: float, hint: int | None = None) -> NearestPoint:
-        """Projection of (px, py) on the path; ``hint`` is the previous index (window search)."""
-        nseg = len(self.x) - 1
-        if hint is None:
-            i, t, off = self._project(px, py, 0, nseg)
-        else:
-            lo = max(0, int(hint) - self.search_back)
-            hi = min(nseg, int(hint) + self.search_ahead)
-            i, t, off = self._project(px, py, lo, hi)
-            on_edge = (i == lo and lo > 0) or (i == hi - 1 and hi < nseg)
-            if on_edge:
-                i, t, off = self._project(px, py, 0, nseg)
+        """Projection of (px, py) on the path; ``hint`` is the previous index (the window
+        search of :func:`fourws_common.path_lookup.windowed_search`, ``search_back``
+        segments behind it and ``search_ahead`` ahead)."""
+        i, t, off = windowed_search(lambda lo, hi: self._project(px, py, lo, hi),
+                                    len(self.x) - 1, None if hint is None else int(hint),
+                                    self.search_back, self.search_ahead)
         seg_len = self.s[i + 1] - self.s[i]
         s = float(self.s[i] + t * seg_len)
         if 0.0 <= t <= 1.0:

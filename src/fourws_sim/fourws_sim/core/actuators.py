@@ -39,7 +39,7 @@ class ActuatorLimits:
     max_steer_rear_rad: float
     max_steer_rate_front_rad_s: float
     max_steer_rate_rear_rad_s: float
-    max_motor_torque_nm: float
+    motor_torque_max_nm: float
 
 
 def motor_transfer_function(tau_s: float) -> tuple[list[float], list[float]]:
@@ -112,7 +112,7 @@ def clip_commands(
         sat(steer_front, limits.max_steer_front_rad, "steer_front"),
         sat(steer_rear, limits.max_steer_rear_rad, "steer_rear"),
         *(
-            sat(t, limits.max_motor_torque_nm, f"wheel_torque[{i}]")
+            sat(t, limits.motor_torque_max_nm, f"wheel_torque[{i}]")
             for i, t in enumerate(wheel_torque)
         ),
     )

@@ -5,7 +5,7 @@ Every path starts with a straight (or asymptotically straight) lead-in at X = ``
 heading ``yaw`` is continuous (unwrapped), in rad, CCW from X; curvature in 1/m, positive to
 the left; ``s`` the arc length from the first sample.
 
-1. ``tanh_dlc``: the "double shifting line" of the literature (paper-notes.md)::
+1. ``tanh_dlc``: the "double shifting line" of the literature (docs/architecture.md, Paper notes)::
 
        z_i = shape/dx_i (X/σ − Xs_i) − shape/2,      k_i = shape/dx_i
        Y   = dy1/2 (1 + tanh z1) − dy2/2 (1 + tanh z2)
@@ -53,6 +53,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from fourws_common.path_lookup import nearest_sample
 
 DEFAULT_SPACING_M = 0.05
 DEFAULT_X_START_M = -20.0
@@ -406,14 +408,10 @@ def peak_lateral_accel_demand(path: ReferencePath, speed_mps: float | None = Non
     return float(np.max(np.abs(path.curvature)) * speed_mps**2)
 
 
-def nearest_index(path: ReferencePath, x: float, y: float) -> int:
-    """Index of the path sample nearest to (x, y)."""
-    return int(np.argmin((path.x - x) ** 2 + (path.y - y) ** 2))
-
-
 def lateral_error(path: ReferencePath, x: float, y: float, index: int | None = None) -> float:
     """Signed lateral offset of (x, y) from the path at its nearest point, m, left positive
-    (projection on the nearest sample's normal); ``index``: that point's index if known."""
-    i = nearest_index(path, x, y) if index is None else index
+    (projection on the nearest sample's normal); ``index``: that point's index if known
+    (else a full search, :func:`fourws_common.path_lookup.nearest_sample`)."""
+    i = nearest_sample(path.x, path.y, x, y) if index is None else index
     yaw = path.yaw[i]
     return float(-(x - path.x[i]) * math.sin(yaw) + (y - path.y[i]) * math.cos(yaw))

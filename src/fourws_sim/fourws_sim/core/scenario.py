@@ -16,7 +16,7 @@ A scenario file (``config/scenarios/<name>.yaml``; people's units, converted her
     vehicle: {mass_kg: 800}            # optional overrides merged over vehicle.yaml
     allow_over_mu: false
 
-Drivability (paper-notes.md): the path's peak lateral-acceleration demand max κ v² is
+Drivability (docs/architecture.md): the path's peak lateral-acceleration demand max κ v² is
 computed at the scenario's speed profile and compared with μ g, μ the lowest adhesion on the
 road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
 :meth:`Scenario.summary` gives the one-line statement to print with every run.
@@ -26,26 +26,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-import yaml
-
+from fourws_common.params import read_yaml_file
+from fourws_common.path_lookup import PathIndex, nearest_sample
 from fourws_sim.core.paths import (
     LEAD_OUT_M,
     ReferencePath,
     lateral_error,
-    nearest_index,
     path_from_mapping,
     peak_lateral_accel_demand,
 )
+from fourws_sim.core.plant_io import InitialState, PlantOutputs
 from fourws_sim.core.road import Road, road_from_mapping
-from fourws_sim.core.simulator import InitialState
-from fourws_sim.core.vehicle import VehicleParams, load_vehicle_params
-
-if TYPE_CHECKING:
-    from fourws_sim.core.simulator import PlantOutputs
+from fourws_sim.core.vehicle_params import VehicleParams, load_vehicle_params
 
 TOP_KEYS = {
     "name", "description", "speed_kmh", "road", "path", "end_x_m", "duration_s", "initial",
@@ -76,6 +72,12 @@ class Scenario:
     peak_lat_accel_demand_mps2: float
     mu_g_mps2: float
     source: Path | None = None
+    _path_index: PathIndex = field(init=False, repr=False)
+    """The abort check's nearest-sample search (its window follows the car; a new object,
+    as from ``dataclasses.replace``, starts with a full search)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_path_index", PathIndex(self.path.x, self.path.y))
 
     @property
     def demand_ratio(self) -> float:
@@ -93,8 +95,14 @@ class Scenario:
     def check_end(self, out: PlantOutputs) -> tuple[bool, str]:
         """(done, reason). Normal ends: end_x_m reached, duration reached, end of the path;
         aborts (reason starts with ``"aborted:"``): |lateral error| or |sideslip| beyond the
-        abort limits. (False, "") while the run goes on."""
-        i = nearest_index(self.path, out.x, out.y)
+        abort limits. (False, "") while the run goes on.
+
+        The lateral error is measured at the path sample nearest to the car, found by a
+        windowed search around the previous call's answer (full search on the first call and
+        when the window's answer lies on its edge; ``fourws_common.path_lookup``): the index
+        of a full search as long as the nearest sample moves by less than 200 samples (10 m at
+        the default spacing) between calls, i.e. unless the path comes back near itself."""
+        i = self._path_index.nearest(out.x, out.y)
         e = lateral_error(self.path, out.x, out.y, i)
         if abs(e) > self.abort_lateral_error_m:
             return True, (f"aborted: lateral error {e:+.2f} m beyond "
@@ -146,35 +154,12 @@ def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario
             raise ValueError(f"scenario '{text}' not found in {path.parent} (known: {known})")
     if not path.is_file():
         raise ValueError(f"scenario file {path} does not exist")
-    data = _read_yaml(path)
+    data = read_yaml_file(path)
     if not isinstance(data, Mapping):
         raise ValueError(f"{path}: expected a mapping at the top level")
     cfg = _config_dir(config_dir)
     vehicle_yaml = cfg / "vehicle.yaml"
     return scenario_from_mapping(data, vehicle_yaml=vehicle_yaml, source=path)
-
-
-def _read_yaml(path: Path) -> Any:
-    """The YAML content of a scenario file; ``ValueError`` naming the file (and, for a
-    syntax error, its line and column) when it cannot be read or parsed."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{path}: not UTF-8 text: {exc.reason} at byte {exc.start}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        context = getattr(exc, "context", None)
-        cmark = getattr(exc, "context_mark", None)
-        if context and cmark is not None:
-            context += f" from line {cmark.line + 1}"
-        what = f"{problem} ({context})" if context else problem
-        what = " ".join(str(what).split())  # one line
-        raise ValueError(f"{path}: YAML syntax error{where}: {what}") from None
 
 
 def _number(section: str, key: str, value: Any, lo: float | None = None,
@@ -247,7 +232,7 @@ def scenario_from_mapping(
         if "yaw_deg" in ini:
             raise ValueError("initial: yaw_deg and on_path: true exclude each other "
                              "(on the path, the heading is the path's)")
-        i = nearest_index(path, x0, y0)
+        i = nearest_sample(path.x, path.y, x0, y0)
         x0, y0, yaw0 = float(path.x[i]), float(path.y[i]), float(path.yaw[i])
     initial = InitialState(
         x=x0, y=y0, yaw=yaw0,

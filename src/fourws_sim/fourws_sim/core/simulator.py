@@ -16,67 +16,25 @@ Initial state: the scenario's position, heading and speed, v_y = r = 0, wheels r
 freely (ω = v/R), actuators at rest (zero torque, zero steer), no load transfer, transient
 slip angles at their steady values.
 
-``PlantOutputs`` holds every field of the VehicleState message (SI units): accelerations are
-accelerometer-style body-frame CG accelerations a_x = v̇x − v_y r, a_y = v̇y + v_x r; the
-per-wheel ``fx``/``fy`` are tyre forces in each wheel's own frame; ``yaw`` is continuous
-(not wrapped), like the paths' heading.
+The initial state and the outputs are :class:`~fourws_sim.core.plant_io.InitialState` and
+:class:`~fourws_sim.core.plant_io.PlantOutputs` (``plant_io.py``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fourws_sim.core.actuators import check_finite_commands, clip_commands
+from fourws_sim.core.plant_io import InitialState, PlantOutputs
 from fourws_sim.core.road import Road
-from fourws_sim.core.vehicle import ALPHA, N_STATE, State, TwoTrackModel, VehicleParams
+from fourws_sim.core.vehicle import ALPHA, N_STATE, State, TwoTrackModel
+from fourws_sim.core.vehicle_params import VehicleParams
 
 if TYPE_CHECKING:
     from fourws_sim.core.scenario import Scenario
-
-
-@dataclass(frozen=True)
-class InitialState:
-    """Initial pose and motion, SI: m, rad, m/s, rad/s."""
-
-    x: float = 0.0
-    y: float = 0.0
-    yaw: float = 0.0
-    speed: float = 0.0
-    vy: float = 0.0
-    yaw_rate: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("x", "y", "yaw", "speed", "vy", "yaw_rate"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"initial.{name}: must be finite")
-
-
-@dataclass
-class PlantOutputs:
-    """Every field of the VehicleState message, SI; wheel arrays (4,) FL FR RL RR."""
-
-    t_s: float
-    x: float
-    y: float
-    yaw: float
-    vx: float
-    vy: float
-    yaw_rate: float
-    ax: float
-    ay: float
-    sideslip: float
-    steer_front: float
-    steer_rear: float
-    wheel_speed: np.ndarray
-    wheel_torque: np.ndarray
-    fx: np.ndarray
-    fy: np.ndarray
-    fz: np.ndarray
-    mu: np.ndarray
 
 
 class Simulator:

@@ -1,7 +1,9 @@
 """Nonlinear two-track (four-wheel) vehicle model with wheel spin, motors and steering.
 
 Frames and signs follow docs/conventions.md (ISO 8855: x forward, y left, z up; yaw, yaw rate,
-yaw moment and steer angles positive to the left). Wheel order FL, FR, RL, RR.
+yaw moment and steer angles positive to the left). Wheel order FL, FR, RL, RR
+(``fourws_common.wheels.Wheel``). The parameters are
+:class:`~fourws_sim.core.vehicle_params.VehicleParams` (``vehicle_params.py``).
 
 States (:class:`State`): body velocities v_x, v_y and yaw rate r; position X, Y and yaw ψ
 (continuous, not wrapped); the four wheel spin rates ω_i; per motor the actual torque T_i
@@ -70,27 +72,10 @@ is larger than the arithmetic, and this function runs 40 times per 10 ms control
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
 from enum import IntEnum
-from pathlib import Path
 from typing import Any
 
-import numpy as np
-import yaml
-
-from fourws_common.params import from_mapping, param
-from fourws_sim.core.actuators import ActuatorLimits
-from fourws_sim.core.tyre import TyreCoefficients, cornering_stiffness
-
-
-class Wheel(IntEnum):
-    """Wheel indices, the order of every per-wheel array."""
-
-    FL = 0
-    FR = 1
-    RL = 2
-    RR = 3
+from fourws_sim.core.vehicle_params import SIGMA_MIN_M, VehicleParams
 
 
 class State(IntEnum):
@@ -128,239 +113,6 @@ N_STATE = len(State)
 OMEGA = slice(State.OMEGA_FL, State.OMEGA_RR + 1)
 TORQUE = slice(State.TORQUE_FL, State.TORQUE_RR + 1)
 ALPHA = slice(State.ALPHA_FL, State.ALPHA_RR + 1)
-SIGMA_MIN_M = 0.05
-"""Floor of the lateral relaxation length, m (keeps the slip lag resolved by a 1 ms substep)."""
-WHEEL_SIDE = (1.0, -1.0, 1.0, -1.0)
-"""+1 for the left wheels, −1 for the right wheels (FL, FR, RL, RR)."""
-
-RECORDED_KEYS = (
-    "cornering_stiffness_front_static_n_per_rad",
-    "cornering_stiffness_rear_static_n_per_rad",
-)
-"""Keys of vehicle.yaml that record derived values (not inputs); checked on load."""
-
-
-@dataclass(frozen=True)
-class VehicleParams:
-    """Vehicle, tyre and actuator parameters (SI, except the *_deg fields people edit)."""
-
-    mass_kg: float = param(750.0, "total vehicle mass (Table 5)", lo=100.0, hi=5000.0, unit="kg")
-    yaw_inertia_kg_m2: float = param(
-        750.0, "yaw moment of inertia about the CG (Table 5)", lo=10.0, hi=20000.0, unit="kg*m^2"
-    )
-    wheelbase_m: float = param(2.35, "wheelbase L (Table 5)", lo=0.5, hi=6.0, unit="m")
-    cg_to_front_axle_m: float = param(1.10, "CG to front axle a (Table 5)", lo=0.1, hi=5.0,
-                                      unit="m")
-    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b (Table 5)", lo=0.1, hi=5.0, unit="m")
-    cg_height_m: float = param(0.54, "CG height h (Table 5)", lo=0.0, hi=2.0, unit="m")
-    track_width_front_m: float = param(1.30, "front track width B_f", lo=0.5, hi=3.0, unit="m")
-    track_width_rear_m: float = param(1.30, "rear track width B_r", lo=0.5, hi=3.0, unit="m")
-    wheel_radius_m: float = param(0.27, "effective rolling radius (Table 5)", lo=0.1, hi=1.0,
-                                  unit="m")
-    wheel_inertia_kg_m2: float = param(
-        0.8, "spin inertia of wheel, tyre and motor rotor", lo=0.05, hi=20.0, unit="kg*m^2"
-    )
-    roll_stiffness_front_share: float = param(
-        0.55, "front share of the total roll stiffness", lo=0.0, hi=1.0, unit="1"
-    )
-    load_transfer_time_constant_s: float = param(
-        0.08, "lag of the accelerations that drive load transfer", lo=0.005, hi=1.0, unit="s"
-    )
-    gravity_mps2: float = param(9.81, "gravitational acceleration", lo=9.7, hi=9.9, unit="m/s^2")
-    air_density_kg_m3: float = param(1.2, "air density", lo=0.0, hi=2.0, unit="kg/m^3")
-    drag_coefficient: float = param(0.32, "aerodynamic drag coefficient c_d", lo=0.0, hi=2.0,
-                                    unit="1")
-    frontal_area_m2: float = param(1.9, "frontal area A", lo=0.0, hi=10.0, unit="m^2")
-    rolling_resistance_coeff: float = param(
-        0.012, "rolling resistance coefficient f_r", lo=0.0, hi=0.1, unit="1"
-    )
-    rolling_resistance_speed_mps: float = param(
-        0.5, "speed scale of the tanh that fades rolling resistance at standstill",
-        lo=0.01, hi=5.0, unit="m/s",
-    )
-    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0", lo=100.0, hi=20000.0,
-                                       unit="N")
-    tyre_cornering_coeff_front: float = param(
-        17.73, "p_Ky1 of the front tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
-    )
-    tyre_cornering_coeff_rear: float = param(
-        20.65, "p_Ky1 of the rear tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
-    )
-    tyre_cornering_load_factor: float = param(
-        2.0, "p_Ky2: K_alpha peaks at F_z = p_Ky2 F_z0", lo=0.2, hi=10.0, unit="1"
-    )
-    tyre_long_stiffness_per_load: float = param(
-        17.0, "longitudinal slip stiffness over load c_kappa = K_kappa/F_z", lo=1.0, hi=60.0,
-        unit="1",
-    )
-    tyre_friction_load_sensitivity: float = param(
-        0.0, "p_D2: peak friction falls by this fraction per F_z0 of load above F_z0",
-        lo=-0.5, hi=0.0, unit="1",
-    )
-    tyre_shape_lateral: float = param(1.3, "Magic Formula C_y", lo=1.01, hi=1.99, unit="1")
-    tyre_curvature_lateral: float = param(-1.0, "Magic Formula E_y", lo=-10.0, hi=0.99, unit="1")
-    tyre_shape_longitudinal: float = param(1.65, "Magic Formula C_x", lo=1.01, hi=1.99, unit="1")
-    tyre_curvature_longitudinal: float = param(0.0, "Magic Formula E_x", lo=-10.0, hi=0.99,
-                                               unit="1")
-    tyre_relaxation_peak_over_radius: float = param(
-        1.2, "p_Ty1: peak lateral relaxation length over the wheel radius (0: no lag)",
-        lo=0.0, hi=10.0, unit="1",
-    )
-    tyre_relaxation_load_factor: float = param(
-        2.5, "p_Ty2: the relaxation length peaks at F_z = p_Ty2 F_z0", lo=0.2, hi=10.0, unit="1"
-    )
-    slip_speed_min_mps: float = param(
-        2.5, "floor of the slip denominators max(|v_x|, v_min)", lo=0.1, hi=10.0, unit="m/s"
-    )
-    motor_time_constant_s: float = param(
-        0.02, "in-wheel motor tau of eq. (32) (Table 5)", lo=0.001, hi=1.0, unit="s"
-    )
-    motor_torque_max_nm: float = param(500.0, "in-wheel motor torque limit (each, +/-)",
-                                       lo=1.0, hi=5000.0, unit="N*m")
-    steer_front_time_constant_s: float = param(
-        0.02, "front steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
-    )
-    steer_rear_time_constant_s: float = param(
-        0.02, "rear steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
-    )
-    max_steer_front_deg: float = param(30.0, "front road-wheel angle limit (eq. 20)", lo=1.0,
-                                       hi=60.0, unit="deg")
-    max_steer_rear_deg: float = param(10.0, "rear road-wheel angle limit (eq. 20)", lo=0.0,
-                                      hi=60.0, unit="deg")
-    max_steer_rate_front_deg_s: float = param(
-        80.0, "front road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
-    )
-    max_steer_rate_rear_deg_s: float = param(
-        60.0, "rear road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
-    )
-
-    def __post_init__(self) -> None:
-        total = self.cg_to_front_axle_m + self.cg_to_rear_axle_m
-        if abs(total - self.wheelbase_m) > 1e-3:
-            raise ValueError(
-                f"cg_to_front_axle_m + cg_to_rear_axle_m = {total:.4f} m must equal "
-                f"wheelbase_m = {self.wheelbase_m:.4f} m"
-            )
-
-    # --- derived quantities -------------------------------------------------------------
-
-    @property
-    def static_wheel_loads_n(self) -> np.ndarray:
-        """Static vertical loads (4,), N, FL FR RL RR."""
-        w = self.mass_kg * self.gravity_mps2
-        front = 0.5 * w * self.cg_to_rear_axle_m / self.wheelbase_m
-        rear = 0.5 * w * self.cg_to_front_axle_m / self.wheelbase_m
-        return np.array([front, front, rear, rear])
-
-    def tyre(self, axle: str = "front") -> TyreCoefficients:
-        """Tyre coefficients of the ``"front"`` or ``"rear"`` tyres, or of all four wheels
-        (``"all"``: p_Ky1 as an array FL FR RL RR)."""
-        f, r = self.tyre_cornering_coeff_front, self.tyre_cornering_coeff_rear
-        coeff: float | np.ndarray = {"front": f, "rear": r, "all": np.array([f, f, r, r])}[axle]
-        return TyreCoefficients(
-            nominal_load_n=self.tyre_nominal_load_n,
-            cornering_coeff=coeff,
-            cornering_load_factor=self.tyre_cornering_load_factor,
-            long_stiffness_per_load=self.tyre_long_stiffness_per_load,
-            friction_load_sensitivity=self.tyre_friction_load_sensitivity,
-            shape_lat=self.tyre_shape_lateral,
-            curvature_lat=self.tyre_curvature_lateral,
-            shape_long=self.tyre_shape_longitudinal,
-            curvature_long=self.tyre_curvature_longitudinal,
-        )
-
-    def static_cornering_stiffness(self) -> tuple[float, float]:
-        """Per-tyre cornering stiffness (front, rear) at static load, N/rad: the C_cf, C_cr
-        of the linear single-track model."""
-        loads = self.static_wheel_loads_n
-        return (
-            float(cornering_stiffness(loads[Wheel.FL], self.tyre("front"))),
-            float(cornering_stiffness(loads[Wheel.RL], self.tyre("rear"))),
-        )
-
-    def relaxation_length_m(self, fz_n: np.ndarray | float) -> np.ndarray:
-        """Lateral relaxation length σ (m) at wheel load ``fz_n`` (N), MF 5.2 σ_α0 floored at
-        :data:`SIGMA_MIN_M`; 0 where the lag is off (p_Ty1 = 0)."""
-        if self.tyre_relaxation_peak_over_radius == 0.0:
-            return np.zeros_like(np.asarray(fz_n, dtype=float))
-        sigma = (self.tyre_relaxation_peak_over_radius * self.wheel_radius_m
-                 * np.sin(2.0 * np.arctan(np.asarray(fz_n, dtype=float)
-                                          / (self.tyre_relaxation_load_factor
-                                             * self.tyre_nominal_load_n))))
-        return np.maximum(sigma, SIGMA_MIN_M)
-
-    def understeer_gradient(self) -> float:
-        """K_us = m/L (b/(2C_f) − a/(2C_r)) of the linear single-track model, rad/(m/s²)."""
-        cf, cr = self.static_cornering_stiffness()
-        return (self.mass_kg / self.wheelbase_m) * (
-            self.cg_to_rear_axle_m / (2.0 * cf) - self.cg_to_front_axle_m / (2.0 * cr)
-        )
-
-    def actuator_limits(self) -> ActuatorLimits:
-        """Actuator limits in SI units."""
-        return ActuatorLimits(
-            max_steer_front_rad=math.radians(self.max_steer_front_deg),
-            max_steer_rear_rad=math.radians(self.max_steer_rear_deg),
-            max_steer_rate_front_rad_s=math.radians(self.max_steer_rate_front_deg_s),
-            max_steer_rate_rear_rad_s=math.radians(self.max_steer_rate_rear_deg_s),
-            max_motor_torque_nm=self.motor_torque_max_nm,
-        )
-
-    def wheel_positions_m(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """((x_i), (y_i)) of the wheel centres in the body frame, m, FL FR RL RR."""
-        a, b = self.cg_to_front_axle_m, self.cg_to_rear_axle_m
-        hf, hr = 0.5 * self.track_width_front_m, 0.5 * self.track_width_rear_m
-        return (a, a, -b, -b), (hf, -hf, hr, -hr)
-
-
-def default_vehicle_yaml() -> Path:
-    """Path of the package's vehicle.yaml (source tree or installed share)."""
-    from fourws_common.resources import config_dir
-
-    return config_dir("fourws_sim") / "vehicle.yaml"
-
-
-def read_vehicle_yaml(path: Path | str | None = None) -> dict[str, Any]:
-    """Flat mapping of vehicle.yaml, plain or in ROS params-file form
-    (``node: {ros__parameters: {...}}``); the recorded keys included."""
-    path = Path(path) if path is not None else default_vehicle_yaml()
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh) or {}
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping at the top level")
-    sections = [v for v in data.values() if isinstance(v, dict) and "ros__parameters" in v]
-    if sections:
-        flat: dict[str, Any] = {}
-        for s in sections:
-            flat.update(s["ros__parameters"] or {})
-        return flat
-    return dict(data)
-
-
-def load_vehicle_params(
-    path: Path | str | None = None, overrides: Mapping[str, Any] | None = None
-) -> VehicleParams:
-    """VehicleParams from vehicle.yaml (default: the package's) with ``overrides`` merged over.
-
-    The recorded keys (:data:`RECORDED_KEYS`) are checked against the file's own tyre
-    coefficients (within 0.5 %) and then dropped; with overrides the recorded values describe
-    the base file only. Raises ``ValueError`` naming the offending key.
-    """
-    values = read_vehicle_yaml(path)
-    recorded = {k: values.pop(k) for k in RECORDED_KEYS if k in values}
-    base = from_mapping(VehicleParams, values)
-    if recorded:
-        actual = dict(zip(RECORDED_KEYS, base.static_cornering_stiffness(), strict=True))
-        for key, value in recorded.items():
-            if abs(float(value) - actual[key]) > 0.005 * actual[key]:
-                raise ValueError(
-                    f"{key}: vehicle.yaml records {value} but its tyre coefficients give "
-                    f"{actual[key]:.0f} N/rad; update the recorded value"
-                )
-    if overrides:
-        values.update(overrides)
-        return from_mapping(VehicleParams, values)
-    return base
 
 
 class TwoTrackModel:

@@ -1,7 +1,8 @@
 """Distribution of the total wheel torque T and the yaw moment M_z over four in-wheel motors.
 
-Wheel order FL, FR, RL, RR (:class:`WheelIndex`). ISO 8855 signs: positive M_z turns the car
-left (counter-clockwise seen from above), so the right wheels carry more drive torque.
+Wheel order FL, FR, RL, RR (``fourws_common.wheels.Wheel``). ISO 8855 signs: positive M_z
+turns the car left (counter-clockwise seen from above), so the right wheels carry more drive
+torque.
 With equal front and rear track B and wheel radius r the two demands are, eq. (27),
 
     T_fl + T_fr + T_rl + T_rr = T
@@ -31,7 +32,7 @@ which are equivalent to prescribing the two side sums
       - eq. (31): the denominators read μ_rl²F_zrl² + μ_rl²F_zrl²; they are
         μ_fl²F_zfl² + μ_rl²F_zrl² (resp. front-right + rear-right). Implemented as above.
     The closed form ignores motor limits; each wheel's torque is then clipped to
-    ±max_motor_torque_nm (what the motor would do anyway) and the shortfall reported.
+    ±motor_torque_max_nm (what the motor would do anyway) and the shortfall reported.
 
 ``optimal_bounded`` — beyond the paper
     The same objective with per-wheel box bounds |T_i| ≤ b_i,
@@ -83,11 +84,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import IntEnum
 
 import numpy as np
 
 from fourws_common.params import param
+from fourws_common.wheels import Wheel
 
 METHODS = ("optimal", "optimal_bounded", "rule", "equal")
 PRIORITIES = ("yaw_moment", "total_torque")
@@ -100,17 +101,7 @@ _UNMET_REL_TOL = 1.0e-9
 _RESIDUAL_TOL = 1.0e-6
 
 
-class WheelIndex(IntEnum):
-    """Wheel order on the wire (mirrors ``fourws_sim.core.vehicle.Wheel``, kept local so the
-    allocator does not depend on the simulator package)."""
-
-    FL = 0
-    FR = 1
-    RL = 2
-    RR = 3
-
-
-_FL, _FR, _RL, _RR = WheelIndex.FL, WheelIndex.FR, WheelIndex.RL, WheelIndex.RR
+_FL, _FR, _RL, _RR = Wheel.FL, Wheel.FR, Wheel.RL, Wheel.RR
 
 
 @dataclass(frozen=True)
@@ -120,7 +111,7 @@ class AllocatorConfig:
     method: str = param("optimal", "allocation method", choices=METHODS)
     track_width_m: float = param(1.30, "track width B, front = rear", lo=0.3, hi=5.0, unit="m")
     wheel_radius_m: float = param(0.27, "effective rolling radius r", lo=0.05, hi=2.0, unit="m")
-    max_motor_torque_nm: float = param(500.0, "torque limit of each in-wheel motor, both signs",
+    motor_torque_max_nm: float = param(500.0, "torque limit of each in-wheel motor, both signs",
                                        lo=1.0, hi=1.0e5, unit="N*m")
     priority: str = param("yaw_moment", "which demand optimal_bounded serves first when both "
                           "cannot be met", choices=PRIORITIES)
@@ -136,12 +127,12 @@ class AllocatorConfig:
     @property
     def torque_capacity_nm(self) -> float:
         """Largest |T| the four motors can give (N·m)."""
-        return 4.0 * self.max_motor_torque_nm
+        return 4.0 * self.motor_torque_max_nm
 
     @property
     def yaw_moment_capacity_nm(self) -> float:
         """Largest |M_z| the motors can give at T = 0 (N·m): (B/2r)·4·T_max."""
-        return 2.0 * self.track_width_m * self.max_motor_torque_nm / self.wheel_radius_m
+        return 2.0 * self.track_width_m * self.motor_torque_max_nm / self.wheel_radius_m
 
 
 @dataclass(frozen=True)
@@ -252,7 +243,7 @@ def _finish(torques: list[float], inp: _Inputs, cfg: AllocatorConfig,
 
 
 def _clip_motor(torques: list[float], cfg: AllocatorConfig) -> list[float]:
-    lim = cfg.max_motor_torque_nm
+    lim = cfg.motor_torque_max_nm
     return [_clip(v, -lim, lim) for v in torques]
 
 
@@ -265,7 +256,7 @@ def optimal(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: n
 
     t_nm: total wheel torque (N·m); mz_nm: yaw moment (N·m, + = left); fz_n, fy_n, mu:
     per-wheel vertical load (N), lateral force (N, unused here) and adhesion, shape (4,).
-    Each wheel is finally clipped to ±max_motor_torque_nm.
+    Each wheel is finally clipped to ±motor_torque_max_nm.
     """
     inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
     return _finish(_clip_motor(_optimal_closed_form(inp, cfg), cfg), inp, cfg)
@@ -311,7 +302,7 @@ def wheel_bounds_nm(fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
 
 
 def _bounds(inp: _Inputs, cfg: AllocatorConfig) -> list[float]:
-    lim = cfg.max_motor_torque_nm
+    lim = cfg.motor_torque_max_nm
     r = cfg.wheel_radius_m
     out = [0.0] * 4
     for i in range(4):
@@ -480,7 +471,7 @@ def optimal_bounded(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarra
     torques: list[float] | None = None
     if cfg.bounded_solver == "osqp" and any(v > 0.0 for v in b):
         solver = qp if qp is not None else _default_qp()
-        torques = solver.solve(sl, sr, cap, b, cfg.max_motor_torque_nm)
+        torques = solver.solve(sl, sr, cap, b, cfg.motor_torque_max_nm)
         if torques is None:
             flags = ("solver_fallback",)
     if torques is None:

@@ -1,0 +1,196 @@
+"""A recorded run as per-step numpy arrays: :func:`read_run` -> :class:`RunData`.
+
+The per-step topics (:data:`STEP_TOPICS`) become one row per header stamp (the first
+message of each stamp, sorted by stamp), after :func:`drop_strays` has left out the
+messages off the run's timeline; the reference trajectory, the last ``/run/status`` and the
+rejection counts the nodes published on ``/diagnostics`` come along.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fourws_common import topics
+
+from .reader import McapBag
+
+REFERENCE = topics.REFERENCE_TRAJECTORY.name
+STATUS = topics.RUN_STATUS.name
+DIAGNOSTICS = topics.DIAGNOSTICS.name
+
+
+def _fields(msg: Any) -> list[str]:
+    return [f for f in getattr(msg, "__slots__", ()) if f != "header"]
+
+
+def _stamp_of(msg: Any) -> int | None:
+    header = getattr(msg, "header", None)
+    if header is None:
+        return None
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _column(values: list[Any]) -> np.ndarray:
+    if values and isinstance(values[0], str):
+        return np.array(values, dtype=object)
+    if values and isinstance(values[0], list | tuple | np.ndarray | bytes):
+        try:
+            return np.array([np.asarray(v, dtype=float) for v in values], dtype=float)
+        except ValueError:
+            return np.array(values, dtype=object)
+    if values and isinstance(values[0], bool):
+        return np.array(values, dtype=bool)
+    return np.array(values, dtype=float)
+
+
+def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, int, Any]], int]:
+    """The messages of one per-step topic that lie on the run's timeline, in receive order,
+    and how many did not: the nodes' own stamp rule
+    (:class:`fourws_common.input_guard.StampGate`), so a stray stamped 1e6 s ahead (or in the
+    past) that every controller rejected is not a step of the run either, and the analysis
+    grid does not stretch to it. A message less than the jump limit behind the timeline is
+    kept: it only arrived late."""
+    from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
+
+    gate = StampGate(MAX_STAMP_JUMP_NS)
+    kept = []
+    for row in stamped:
+        verdict = gate.check(row[0])
+        if verdict is Stamp.FUTURE:
+            continue
+        if verdict is Stamp.PAST and gate.last_ns - row[0] > MAX_STAMP_JUMP_NS:
+            continue  # a late arrival within the window is kept (rows are sorted by stamp)
+        kept.append(row)
+    return kept, len(stamped) - len(kept)
+
+
+def _columns(stamped: list[tuple[int, int, Any]]) -> dict[str, np.ndarray]:
+    """Per-step columns from ``(stamp_ns, log_time_ns, msg)``: the first message of each
+    stamp, sorted by stamp; ``log_ns`` is when the recorder received it."""
+    first: dict[int, tuple[int, Any]] = {}
+    for stamp, log_ns, msg in stamped:
+        if stamp not in first:
+            first[stamp] = (log_ns, msg)
+    stamps = sorted(first)
+    out: dict[str, np.ndarray] = {"stamp_ns": np.array(stamps, dtype=np.int64),
+                                  "t_s": np.array(stamps, dtype=np.int64) * 1e-9,
+                                  "log_ns": np.array([first[s][0] for s in stamps],
+                                                     dtype=np.int64)}
+    if not stamps:
+        return out
+    for name in _fields(first[stamps[0]][1]):
+        out[name] = _column([getattr(first[s][1], name) for s in stamps])
+    return out
+
+
+#: The graph's per-step topics, each with the :class:`RunData` attribute it is read into.
+STEP_TOPICS = {topics.VEHICLE_STATE.name: "state", topics.MPC_COMMAND.name: "mpc_command",
+               topics.MPC_DIAGNOSTICS.name: "mpc_diagnostics",
+               topics.DRIVE_COMMAND.name: "drive_command",
+               topics.WHEEL_TORQUES.name: "wheel_torques"}
+
+
+@dataclass
+class RunData:
+    """A recorded run as per-step numpy arrays (SI units, as on the wire).
+
+    Each per-topic dict has ``stamp_ns`` (int64), ``t_s``, ``log_ns`` (int64, the recorder's
+    receive time, wall clock) and one array per message field
+    (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one row per header
+    stamp (the first message of each stamp), sorted by stamp. A topic absent from the bag
+    gives a dict with empty ``stamp_ns``/``t_s``/``log_ns`` only.
+    """
+
+    path: Path
+    state: dict[str, np.ndarray]
+    mpc_command: dict[str, np.ndarray]
+    mpc_diagnostics: dict[str, np.ndarray]
+    drive_command: dict[str, np.ndarray]
+    wheel_torques: dict[str, np.ndarray]
+    reference: dict[str, np.ndarray] | None
+    status: dict[str, Any] | None
+    message_counts: dict[str, int]
+    #: Rejected inputs per node from /diagnostics: {node: {kind: count}}, the highest count
+    #: each node reported (its counters only grow within a run).
+    rejections: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: Messages per topic off the run's timeline (:func:`drop_strays`), left out above.
+    strays: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        """Number of distinct VehicleState stamps."""
+        return int(len(self.state["stamp_ns"]))
+
+    @property
+    def controller(self) -> str | None:
+        """Controller name from the MPC diagnostics (the last one), if recorded."""
+        c = self.mpc_diagnostics.get("controller")
+        return str(c[-1]) if c is not None and len(c) else None
+
+    @property
+    def scenario(self) -> str | None:
+        """Scenario name from /run/status, if recorded."""
+        return None if not self.status else self.status.get("scenario")
+
+
+def read_run(path: str | Path) -> RunData:
+    """Decode a run folder (``bag/`` inside), a bag folder or a bare ``.mcap`` into arrays.
+
+    Raises :class:`BagError` naming the file for a missing, truncated or corrupt bag.
+    """
+    with McapBag(path) as bag:
+        counts = {t: c.message_count for t, c in bag.channels.items()}
+        per: dict[str, list[tuple[int, Any]]] = {t: [] for t in STEP_TOPICS}
+        reference = None
+        status_text = None
+        rejections: dict[str, dict[str, int]] = {}
+        wanted = [t for t in (*STEP_TOPICS, REFERENCE, STATUS, DIAGNOSTICS)
+                  if t in bag.channels]
+        for topic, log_ns, msg in bag.decoded(wanted):
+            if topic in per:
+                stamp = _stamp_of(msg)
+                if stamp is not None:
+                    per[topic].append((stamp, log_ns, msg))
+            elif topic == REFERENCE:
+                reference = msg
+            elif topic == STATUS:
+                status_text = msg.data
+            elif topic == DIAGNOSTICS:
+                _add_rejections(rejections, msg)
+        path_out = bag.path
+    ref_arrays = None
+    if reference is not None:
+        ref_arrays = {name: np.asarray(getattr(reference, name), dtype=float)
+                      for name in _fields(reference)}
+        ref_arrays["stamp_ns"] = np.int64(_stamp_of(reference) or 0)
+    status = None
+    if status_text is not None:
+        try:
+            status = json.loads(status_text)
+        except ValueError:
+            status = {"raw": status_text}
+    strays: dict[str, int] = {}
+    for t in STEP_TOPICS:
+        per[t], n = drop_strays(per[t])
+        if n:
+            strays[t] = n
+    cols = {attr: _columns(per[t]) for t, attr in STEP_TOPICS.items()}
+    return RunData(path=path_out, reference=ref_arrays, status=status,
+                   message_counts=counts, rejections=rejections, strays=strays, **cols)
+
+
+def _add_rejections(out: dict[str, dict[str, int]], msg: Any) -> None:
+    """Fold one DiagnosticArray's counters (KeyValue value = a count) into ``out``."""
+    for st in msg.status:
+        node = out.setdefault(str(st.name).lstrip("/"), {})
+        for kv in st.values:
+            try:
+                n = int(kv.value)
+            except ValueError:
+                continue
+            node[kv.key] = max(n, node.get(kv.key, 0))
