@@ -64,9 +64,10 @@ def scenario_with_vehicle(name: str, vehicle: dict, folder: Path) -> str:
     vehicle overrides."""
     import yaml
 
+    from fourws_common.params import read_yaml_file
     from fourws_sim.core.scenario import scenarios_dir
 
-    data = yaml.safe_load((scenarios_dir() / f"{name}.yaml").read_text(encoding="utf-8"))
+    data = read_yaml_file(scenarios_dir() / f"{name}.yaml")
     data["vehicle"] = {**(data.get("vehicle") or {}), **vehicle}
     tag = "_".join(f"{k}-{v:g}" for k, v in sorted(vehicle.items()))
     path = folder / f"{name}__{tag}.yaml"

@@ -70,6 +70,15 @@ def test_ros_params_file_form_is_accepted(tmp_path):
     assert load_vehicle_params(path) == VehicleParams()
 
 
+def test_unreadable_or_broken_vehicle_yaml_names_the_file(tmp_path):
+    bad = tmp_path / "vehicle.yaml"
+    bad.write_text("mass_kg: 750.0\nwheelbase_m: [2.35\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"vehicle\.yaml: YAML syntax error at line 3"):
+        load_vehicle_params(bad)
+    with pytest.raises(ValueError, match="cannot read"):
+        load_vehicle_params(tmp_path / "missing.yaml")
+
+
 def test_overrides_apply():
     p = load_vehicle_params(overrides={"mass_kg": 800.0, "track_width_rear_m": 1.35})
     assert p.mass_kg == 800.0 and p.track_width_rear_m == 1.35

@@ -30,24 +30,15 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth
-from fourws_common.input_guard import (
-    MAX_STAMP_JUMP_NS,
-    InputConfig,
-    Stamp,
-    StampGate,
-    implausible_fields,
-)
-from fourws_common.latest_input import LatestInput
 from fourws_common.node_main import run_node
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
+from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
 from fourws_common.ros_params import ParamBinding
+from fourws_common.state_input import StateHandlers, StateInput
 from fourws_common.topics import (
     MPC_COMMAND,
     MPC_DIAGNOSTICS,
     REFERENCE_TRAJECTORY,
-    VEHICLE_STATE,
 )
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MpcController, VehicleSample
@@ -65,15 +56,8 @@ class MpcNode(Node):
         self.ctrl = MpcController(self.params.config)
         self.ref: Reference | None = None
         self.ref_msg: ReferenceTrajectory | None = None
-        self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
-        self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
-        self.latest = LatestInput(self, self.health.guard(VEHICLE_STATE.name, self._on_state),
-                                  self.health)
-        self.inputs = ParamBinding(self, InputConfig,
-                                   on_change=lambda c: self.latest.set_sync(c.sync))
-        self.latest.set_sync(self.inputs.config.sync)
         self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.name, CONTROL_QOS)
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
@@ -83,9 +67,11 @@ class MpcNode(Node):
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, VEHICLE_STATE.name,
-                                 self.health.guard(VEHICLE_STATE.name, self.latest.offer),
-                                 LATEST_QOS)
+        self.state_input = StateInput(
+            self, self.health, CHECKED_FIELDS,
+            StateHandlers(ready=lambda: self.ref is not None, step=self._step,
+                          repeat=self._repeat, held=self._answer_held, reset=self._reset),
+            "controller")
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 
     def _on_params(self, cfg: MpcConfig) -> None:
@@ -118,48 +104,16 @@ class MpcNode(Node):
 
     def _reset(self) -> None:
         self.ctrl.reset()
-        self.gate.reset()
+        self.state_input.reset()
         self.cached = None
 
-    def _on_state(self, msg: VehicleState) -> None:
-        stamp_ns = stamp_to_ns(msg.header.stamp)
-        bad = implausible_fields(msg, CHECKED_FIELDS)
-        if bad:
-            self.health.reject("implausible_state", stamp_ns, f"rejected vehicle state at "
-                               f"{stamp_ns} ns: {', '.join(bad)}")
-            return
-        if self.ref is None:
-            self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
-            return
-        prev_ns = self.gate.last_ns
-        verdict = self.gate.check(stamp_ns)
-        if verdict is Stamp.REPEAT:
-            if self.cached is not None:
-                self.pub_cmd.publish(self.cached[0])
-                self.pub_diag.publish(self.cached[1])
-            return
-        if verdict in (Stamp.PAST, Stamp.FUTURE):
-            self.health.reject(f"{verdict.value}_stamp", stamp_ns,
-                               f"rejected state stamped {stamp_ns} ns: in the "
-                               f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
-            return
-        if verdict is Stamp.JUMPED and stamp_ns < prev_ns:
-            self.get_logger().warning(f"stamps went back to {stamp_ns} ns: new run, "
-                                      "controller reset")
-            self._reset()
-            self.gate.check(stamp_ns)
-        elif verdict is Stamp.JUMPED:
-            self.get_logger().warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} "
-                                      "ns): continuing")
-        try:
-            self._step(msg, stamp_ns)
-        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
-            self.health.error("step_error", stamp_ns, exc, f"the state at {stamp_ns} ns "
-                              f"({', '.join(f'{k}={getattr(msg, k):.6g}' for k in STATE_FIELDS)})")
-            self._answer_held(msg)
+    def _repeat(self) -> None:
+        if self.cached is not None:
+            self.pub_cmd.publish(self.cached[0])
+            self.pub_diag.publish(self.cached[1])
 
-    def _step(self, msg: VehicleState, stamp_ns: int) -> None:
-        meas = VehicleSample(**{k: float(getattr(msg, k)) for k in STATE_FIELDS})
+    def _step(self, msg: VehicleState, stamp_ns: int, _jumped_ahead: bool) -> None:
+        meas = VehicleSample.of(msg)
         t0 = time.perf_counter()
         mu = float(np.mean(msg.mu)) if len(msg.mu) else float("nan")
         res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref,

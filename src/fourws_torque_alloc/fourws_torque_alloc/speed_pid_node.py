@@ -16,21 +16,13 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth
-from fourws_common.input_guard import (
-    MAX_STAMP_JUMP_NS,
-    InputConfig,
-    Stamp,
-    StampGate,
-    implausible_fields,
-)
-from fourws_common.latest_input import LatestInput
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
+from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
 from fourws_common.ros_params import ParamBinding
-from fourws_common.topics import DRIVE_COMMAND, REFERENCE_TRAJECTORY, VEHICLE_STATE
+from fourws_common.state_input import StateHandlers, StateInput
+from fourws_common.topics import DRIVE_COMMAND, REFERENCE_TRAJECTORY
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
 from fourws_torque_alloc.core.pid import SpeedPid, SpeedPidConfig
 
@@ -44,24 +36,19 @@ class SpeedPidNode(Node):
         self.params = ParamBinding(self, SpeedPidConfig, on_change=self._on_params)
         self.pid = SpeedPid(self.params.config)
         self.profile: SpeedProfile | None = None
-        self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
-        self.wait_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
-        self.latest = LatestInput(self, self.health.guard(VEHICLE_STATE.name, self._on_state),
-                                  self.health)
-        self.inputs = ParamBinding(self, InputConfig,
-                                   on_change=lambda c: self.latest.set_sync(c.sync))
-        self.latest.set_sync(self.inputs.config.sync)
         self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.name, CONTROL_QOS)
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  LATCHED_QOS)
-        self.create_subscription(VehicleState, VEHICLE_STATE.name,
-                                 self.health.guard(VEHICLE_STATE.name, self.latest.offer),
-                                 LATEST_QOS)
+        self.state_input = StateInput(
+            self, self.health, ("x", "y", "vx"),
+            StateHandlers(ready=lambda: self.profile is not None, step=self._step,
+                          repeat=self._repeat, held=self._held, reset=self._reset),
+            "PID")
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
         self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless
@@ -85,51 +72,26 @@ class SpeedPidNode(Node):
 
     def _reset(self) -> None:
         self.pid.reset()
-        self.gate.reset()
+        self.state_input.reset()
         self.prev_ns = None
         self.cached = None
 
-    def _on_state(self, msg: VehicleState) -> None:
-        stamp_ns = stamp_to_ns(msg.header.stamp)
-        bad = implausible_fields(msg, ("x", "y", "vx"))
-        if bad:
-            self.health.reject("implausible_state", stamp_ns, f"rejected vehicle state at "
-                               f"{stamp_ns} ns: {', '.join(bad)}")
-            return
-        if self.profile is None:
-            self.wait_log(stamp_ns, "no reference trajectory yet: not answering states")
-            return
-        prev_ns = self.gate.last_ns
-        verdict = self.gate.check(stamp_ns)
-        if verdict is Stamp.REPEAT:
-            if self.cached is not None:
-                self.pub.publish(self.cached)
-            return
-        if verdict in (Stamp.PAST, Stamp.FUTURE):
-            self.health.reject(f"{verdict.value}_stamp", stamp_ns,
-                               f"rejected state stamped {stamp_ns} ns: in the "
-                               f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
-            return
-        if verdict is Stamp.JUMPED and stamp_ns < prev_ns:
-            self.get_logger().warning(f"stamps went back to {stamp_ns} ns: new run, PID reset")
-            self._reset()
-            self.gate.check(stamp_ns)
-        elif verdict is Stamp.JUMPED:
-            self.get_logger().warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} "
-                                      "ns): continuing at the nominal period")
-            self.prev_ns = None
+    def _repeat(self) -> None:
+        if self.cached is not None:
+            self.pub.publish(self.cached)
+
+    def _held(self, msg: VehicleState) -> None:
+        held = self._cmd_msg  # the last valid command (zeros before the first)
+        held.header = msg.header
+        self.cached = held
+        self.pub.publish(held)
+
+    def _step(self, msg: VehicleState, stamp_ns: int, jumped_ahead: bool) -> None:
+        if jumped_ahead:
+            self.prev_ns = None  # continue at the nominal period
         dt_s = NOMINAL_DT_S if self.prev_ns is None else (stamp_ns - self.prev_ns) * 1e-9
-        try:
-            v_ref, a_ref = self.profile.at(msg.x, msg.y)
-            out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
-        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
-            self.health.error("step_error", stamp_ns, exc, f"the state at {stamp_ns} ns "
-                              f"(x={msg.x:.6g}, y={msg.y:.6g}, vx={msg.vx:.6g})")
-            held = self._cmd_msg  # the last valid command (zeros before the first)
-            held.header = msg.header
-            self.cached = held
-            self.pub.publish(held)
-            return
+        v_ref, a_ref = self.profile.at(msg.x, msg.y)
+        out = self.pid.step(v_ref, msg.vx, dt_s, a_ref)
         self.prev_ns = stamp_ns
         cmd = self._cmd_msg
         cmd.header, cmd.force, cmd.torque = msg.header, out.force_n, out.torque_nm

@@ -1,0 +1,116 @@
+"""The controllers' one /vehicle/state input pipeline (MPC and speed PID alike).
+
+Each state goes through, in this order:
+
+1. the ``sync`` mode (:class:`~fourws_common.latest_input.LatestInput`, parameter ``sync`` of
+   :class:`~fourws_common.input_guard.InputConfig`);
+2. plausibility (:func:`~fourws_common.input_guard.implausible_fields` on the fields the core
+   reads): an implausible state is rejected and counted;
+3. a reference must have arrived (else the state is not answered; logged every 5 s);
+4. the stamp rule (:class:`~fourws_common.input_guard.StampGate`): a repeat is answered from
+   the cache, a stamp in the past or the far future is rejected, a confirmed jump back is a
+   new run (the node's core is reset), a confirmed jump ahead continues;
+5. the node's step; an exception in it is caught, logged with the state, and answered with
+   the node's held output. A callback never kills the node.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rclpy.node import Node
+
+from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.health import NodeHealth
+from fourws_common.input_guard import (
+    MAX_STAMP_JUMP_NS,
+    InputConfig,
+    Stamp,
+    StampGate,
+    implausible_fields,
+)
+from fourws_common.latest_input import LatestInput
+from fourws_common.qos import LATEST_QOS
+from fourws_common.ros_params import ParamBinding
+from fourws_common.topics import VEHICLE_STATE
+from fourws_msgs.msg import VehicleState
+
+
+@dataclass(frozen=True)
+class StateHandlers:
+    """What a node does at each outcome of the pipeline."""
+
+    ready: Callable[[], bool]                 # a reference has arrived
+    step: Callable[[Any, int, bool], None]    # (state, stamp_ns, after a jump ahead)
+    repeat: Callable[[], None]                # answer a repeated stamp from the cache
+    held: Callable[[Any], None]               # answer after a failed step
+    reset: Callable[[], None]                 # new run: reset the node's core
+
+
+class StateInput:
+    """Subscribes ``node`` to /vehicle/state through the pipeline of the module docstring.
+
+    ``checked``: the state fields the core reads; ``core_name``: what a reset resets, for
+    the log ("controller", "PID").
+    """
+
+    def __init__(self, node: Node, health: NodeHealth, checked: Sequence[str],
+                 handlers: StateHandlers, core_name: str) -> None:
+        self._node, self._health, self._h = node, health, handlers
+        self._checked = tuple(checked)
+        self._core_name = core_name
+        self.gate = StampGate(MAX_STAMP_JUMP_NS)
+        self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
+        self.latest = LatestInput(node, health.guard(VEHICLE_STATE.name, self._on_state),
+                                  health)
+        self.inputs = ParamBinding(node, InputConfig,
+                                   on_change=lambda c: self.latest.set_sync(c.sync))
+        self.latest.set_sync(self.inputs.config.sync)
+        node.create_subscription(VehicleState, VEHICLE_STATE.name,
+                                 health.guard(VEHICLE_STATE.name, self.latest.offer),
+                                 LATEST_QOS)
+
+    def reset(self) -> None:
+        """Forget the stamps (a new run starts from any stamp)."""
+        self.gate.reset()
+
+    def _on_state(self, msg: Any) -> None:
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        bad = implausible_fields(msg, self._checked)
+        if bad:
+            self._health.reject("implausible_state", stamp_ns, f"rejected vehicle state at "
+                                f"{stamp_ns} ns: {', '.join(bad)}")
+            return
+        if not self._h.ready():
+            self._wait_log(stamp_ns, "no reference trajectory yet: not answering states")
+            return
+        prev_ns = self.gate.last_ns
+        verdict = self.gate.check(stamp_ns)
+        if verdict is Stamp.REPEAT:
+            self._h.repeat()
+            return
+        if verdict in (Stamp.PAST, Stamp.FUTURE):
+            self._health.reject(f"{verdict.value}_stamp", stamp_ns,
+                                f"rejected state stamped {stamp_ns} ns: in the "
+                                f"{verdict.value} of the last one ({self.gate.last_ns} ns)")
+            return
+        jumped_ahead = False
+        log = self._node.get_logger()
+        if verdict is Stamp.JUMPED and stamp_ns < prev_ns:
+            log.warning(f"stamps went back to {stamp_ns} ns: new run, {self._core_name} reset")
+            self._h.reset()
+            self.gate.reset()
+            self.gate.check(stamp_ns)
+        elif verdict is Stamp.JUMPED:
+            log.warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} ns): continuing")
+            jumped_ahead = True
+        try:
+            self._h.step(msg, stamp_ns, jumped_ahead)
+        except Exception as exc:  # noqa: BLE001 - a callback never kills the node
+            fields = ", ".join(f"{k}={getattr(msg, k):.6g}" for k in self._checked
+                               if isinstance(getattr(msg, k), float))
+            self._health.error("step_error", stamp_ns, exc,
+                               f"the state at {stamp_ns} ns ({fields})")
+            self._h.held(msg)
