@@ -30,7 +30,7 @@ from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
 from fourws_common.qos import CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from fourws_common.resources import config_dir
-from fourws_mpc.core.controller import MpcController
+from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
 from fourws_sim.core.scenario import load_scenario
@@ -411,7 +411,7 @@ def test_a_parameter_set_mid_run_applies_from_that_step_and_keeps_the_state(grap
         msg.header.stamp = ns_to_stamp(k * STEP_NS)
         _answered(ros, pub, msg, got)
         c = got[k * STEP_NS]
-        r = oracle.step(k * 0.01, msg, ref, mu=float(np.mean(msg.mu)))
+        r = oracle.step(k * 0.01, VehicleSample.of(msg), ref, mu=float(np.mean(msg.mu)))
         assert (c.delta_front, c.delta_rear, c.yaw_moment) == \
             (r.delta_front, r.delta_rear, r.yaw_moment), k
         sim.step(c.delta_front, c.delta_rear, torque, dt_s=0.01)
