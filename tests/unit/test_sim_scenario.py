@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
+from fourws_common.params import load_ros_params_yaml
+from fourws_common.resources import config_dir
 from fourws_sim.core.paths import lateral_error
 from fourws_sim.core.scenario import (
+    AbortLimits,
     list_scenarios,
     load_scenario,
     scenario_from_mapping,
@@ -19,6 +22,10 @@ from fourws_sim.core.scenario import (
 from fourws_sim.core.simulator import Simulator
 
 REQUIRED = {"dlc_60_mu05", "dlc_90_mu06", "circle_mu10", "iso3888_80_mu08", "mu_step", "split_mu"}
+
+_PLANT = load_ros_params_yaml(str(config_dir("fourws_sim") / "plant.yaml"), "plant_node")
+ABORT = AbortLimits.of(_PLANT["abort_lateral_error_m"], _PLANT["abort_sideslip_deg"])
+TIGHT = AbortLimits.of(3.0, 15.0)  # limits a test sets for itself
 
 
 def _raw(name: str) -> dict:
@@ -73,7 +80,7 @@ def test_demand_above_mu_g_raises_unless_allowed():
     [({"colour": "red"}, "colour"), ({"speed_kmh": -5.0}, "speed_kmh"),
      ({"vehicle": {"mass_kg": -1.0}}, "mass_kg"), ({"initial": {"z_m": 1.0}}, "z_m"),
      ({"allow_over_mu": "yes"}, "allow_over_mu"), ({"road": {"type": "ice"}}, "road.type"),
-     ({"abort": {"sideslip_deg": 0.0}}, "sideslip_deg")],
+     ({"abort": {"sideslip_deg": 0.0}}, "abort")],
 )
 def test_bad_scenarios_raise_naming_the_key(change, match):
     raw = _raw("dlc_60_mu05")
@@ -134,7 +141,7 @@ def test_simulator_from_scenario_starts_at_the_initial_state():
     np.testing.assert_allclose(out.wheel_speed, 25.0 / s.vehicle.wheel_radius_m)
     np.testing.assert_array_equal(out.wheel_torque, 0.0)
     np.testing.assert_array_equal(out.mu, 0.6)
-    assert sim.check_end(s) == (False, "")
+    assert s.check_end(sim.outputs(), ABORT) == (False, "")
 
 
 def test_check_end_reasons():
@@ -142,17 +149,17 @@ def test_check_end_reasons():
     sim = Simulator.from_scenario(s)
     out = sim.outputs()
     out.x, out.y = s.end_x_m + 0.1, -1.65
-    done, reason = s.check_end(out)
+    done, reason = s.check_end(out, TIGHT)
     assert done and "end_x_m" in reason and not reason.startswith("aborted")
     out.x, out.y = 50.0, float(np.interp(50.0, s.path.x, s.path.y)) + 3.5
-    done, reason = s.check_end(out)
+    done, reason = s.check_end(out, TIGHT)
     assert done and reason.startswith("aborted: lateral error")
     out.y = float(np.interp(50.0, s.path.x, s.path.y))
     out.sideslip = math.radians(20.0)
-    done, reason = s.check_end(out)
+    done, reason = s.check_end(out, TIGHT)
     assert done and reason.startswith("aborted: sideslip")
     out.sideslip, out.t_s = 0.0, s.duration_s
-    assert s.check_end(out)[0]
+    assert s.check_end(out, TIGHT)[0]
 
 
 def test_open_loop_straight_run_drifts_off_the_lane_change_path_and_is_aborted():
@@ -162,11 +169,11 @@ def test_open_loop_straight_run_drifts_off_the_lane_change_path_and_is_aborted()
     torque = np.full(4, 15.0)
     for _ in range(2000):
         out = sim.step(0.0, 0.0, torque)
-        done, reason = sim.check_end(s, out)
+        done, reason = s.check_end(out, TIGHT)
         if done:
             break
     assert done and reason.startswith("aborted: lateral error")
-    assert abs(lateral_error(s.path, out.x, out.y)) > s.abort_lateral_error_m
+    assert abs(lateral_error(s.path, out.x, out.y)) > TIGHT.lateral_error_m
 
 
 @pytest.mark.parametrize("name", sorted(REQUIRED))
@@ -188,8 +195,21 @@ def test_a_simple_pure_pursuit_driver_completes_every_scenario(name):
         force = veh.mass_kg * 2.0 * (p.speed[i] - out.vx) + 0.37 * out.vx**2 + 88.0
         out = sim.step(delta, 0.0, np.full(4, force * veh.wheel_radius_m / 4))
         e_max = max(e_max, abs(lateral_error(p, out.x, out.y)))
-        done, reason = sim.check_end(s, out)
+        done, reason = s.check_end(out, ABORT)
         if done:
             break
     assert done and reason.startswith("end of scenario"), reason
     assert e_max < 1.0
+
+
+def test_abort_limits_have_one_owner_the_plant_parameters():
+    """A scenario cannot set abort limits (the plant's parameters are their one source)."""
+    raw = _raw("dlc_60_mu05")
+    raw["abort"] = {"lateral_error_m": 3.0}
+    with pytest.raises(ValueError, match="abort"):
+        scenario_from_mapping(raw)
+    s = load_scenario("dlc_60_mu05")
+    out = Simulator.from_scenario(s).outputs()
+    out.y += 2.0                                   # 2 m off the path
+    assert s.check_end(out, AbortLimits.of(1.0, 30.0))[1].startswith("aborted: lateral")
+    assert s.check_end(out, AbortLimits.of(3.0, 30.0)) == (False, "")

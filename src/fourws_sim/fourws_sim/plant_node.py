@@ -39,7 +39,6 @@ scenario's end, when the car leaves the road (``abort_lateral_error_m``) or spin
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -78,7 +77,7 @@ from fourws_common.topics import (
     WHEEL_TORQUES,
 )
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
-from fourws_sim.core.scenario import load_scenario
+from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.simulator import Simulator
 
 
@@ -132,9 +131,8 @@ class PlantNode(Node):
         super().__init__("plant_node")
         self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
         cfg = self.params.config
-        self.scenario = dataclasses.replace(
-            load_scenario(cfg.scenario), abort_lateral_error_m=cfg.abort_lateral_error_m,
-            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
+        self.scenario = load_scenario(cfg.scenario)
+        self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s)
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
@@ -202,9 +200,7 @@ class PlantNode(Node):
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
-        self.scenario = dataclasses.replace(
-            self.scenario, abort_lateral_error_m=cfg.abort_lateral_error_m,
-            abort_sideslip_rad=math.radians(cfg.abort_sideslip_deg))
+        self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.get_logger().info("parameters updated: abort limits apply now; scenario, mode "
                                "and timing apply to the next run")
 
@@ -305,7 +301,7 @@ class PlantNode(Node):
                           f"{math.degrees(df):.2f}°, {math.degrees(dr):.2f}°)")
 
     def _end_check(self) -> tuple[bool, str, bool]:
-        ended, reason = self.scenario.check_end(self.outputs)
+        ended, reason = self.scenario.check_end(self.outputs, self.abort)
         return ended, reason, ended and not reason.startswith("aborted")
 
     def _status_heartbeat(self) -> None:

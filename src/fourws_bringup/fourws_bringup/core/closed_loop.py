@@ -22,7 +22,6 @@ of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,7 +39,7 @@ from fourws_bringup.core.metrics import run_metrics
 from fourws_common.path_lookup import SpeedProfile
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
-from fourws_sim.core.scenario import Scenario, load_scenario
+from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.simulator import Simulator
 from fourws_torque_alloc.core.allocation import TorqueAllocator
 from fourws_torque_alloc.core.pid import SpeedPid
@@ -89,17 +88,6 @@ class ClosedLoopLog:
         return m
 
 
-def with_plant_aborts(scenario: Scenario, plant: dict[str, Any]) -> Scenario:
-    """The scenario with plant_node's abort limits, which override the scenario's own (as
-    in the graph), so the in-process loop ends a run exactly where the plant node does."""
-    return dataclasses.replace(
-        scenario,
-        abort_lateral_error_m=float(plant.get("abort_lateral_error_m",
-                                              scenario.abort_lateral_error_m)),
-        abort_sideslip_rad=math.radians(float(plant["abort_sideslip_deg"]))
-        if "abort_sideslip_deg" in plant else scenario.abort_sideslip_rad)
-
-
 def run_closed_loop(
     scenario_name_or_path: str,
     controller_name: str,
@@ -113,7 +101,8 @@ def run_closed_loop(
     ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests).
     """
     plant = plant_values()
-    scenario = with_plant_aborts(load_scenario(scenario_name_or_path), plant)
+    scenario = load_scenario(scenario_name_or_path)
+    abort = AbortLimits.of(plant["abort_lateral_error_m"], plant["abort_sideslip_deg"])
     mpc_cfg = load_mpc_config(controller_name, mpc_overrides)
     alloc_cfg = load_allocator_config(controller_name)
     dt, substep = float(plant.get("dt_s", 0.01)), float(plant.get("substep_s", 0.001))
@@ -132,7 +121,7 @@ def run_closed_loop(
     status: list[str] = []
     force, torque, wcmd, solve = [], [], [], []
     out = sim.outputs()
-    done, reason = scenario.check_end(out)
+    done, reason = scenario.check_end(out, abort)
     k = 0
     while not done and (max_steps is None or k < max_steps):
         t0 = clock() if clock is not None else 0.0
@@ -151,7 +140,7 @@ def run_closed_loop(
         wcmd.append(np.array(a.torque_nm, dtype=float))
         out = sim.step(res.delta_front, res.delta_rear, a.torque_nm, dt)
         k += 1
-        done, reason = scenario.check_end(out)
+        done, reason = scenario.check_end(out, abort)
     if not done:
         reason = f"max_steps = {max_steps} reached"
     log = ClosedLoopLog(

@@ -12,9 +12,13 @@ A scenario file (``config/scenarios/<name>.yaml``; people's units, converted her
     initial: {x_m: 0, y_m: 0, yaw_deg: 0, speed_kmh: 60}   # speed defaults to speed_kmh
     # or {on_path: true, x_m: 0}: start on the path sample nearest to (x_m, y_m), with its
     # heading (a tanh path is 2 mm off Y = 0 at X = 0: this keeps that out of the errors)
-    abort: {lateral_error_m: 3.0, sideslip_deg: 15}        # optional, these are the defaults
     vehicle: {mass_kg: 800}            # optional overrides merged over vehicle.yaml
     allow_over_mu: false
+
+When a run is aborted (the car left the road or spins) is not the scenario's business: the
+limits are the plant's parameters (``plant.yaml``: ``abort_lateral_error_m``,
+``abort_sideslip_deg``; :class:`AbortLimits`), read by the plant node and the in-process loop
+alike, and :meth:`Scenario.check_end` takes them.
 
 Drivability (docs/architecture.md): the path's peak lateral-acceleration demand max κ v² is
 computed at the scenario's speed profile and compared with μ g, μ the lowest adhesion on the
@@ -45,12 +49,24 @@ from fourws_sim.core.vehicle_params import VehicleParams, load_vehicle_params
 
 TOP_KEYS = {
     "name", "description", "speed_kmh", "road", "path", "end_x_m", "duration_s", "initial",
-    "abort", "vehicle", "allow_over_mu",
+    "vehicle", "allow_over_mu",
 }
 INITIAL_KEYS = {"x_m", "y_m", "yaw_deg", "speed_kmh", "on_path"}
-ABORT_KEYS = {"lateral_error_m", "sideslip_deg"}
-DEFAULT_ABORT_LATERAL_ERROR_M = 3.0
-DEFAULT_ABORT_SIDESLIP_DEG = 15.0
+
+
+@dataclass(frozen=True)
+class AbortLimits:
+    """The plant ends a run as aborted beyond these: |lateral error| (m, the car left the
+    road) or |sideslip| (rad, above 1 m/s: the car spins). Their one source is the plant's
+    parameters ``abort_lateral_error_m`` and ``abort_sideslip_deg`` (:meth:`of`)."""
+
+    lateral_error_m: float
+    sideslip_rad: float
+
+    @classmethod
+    def of(cls, lateral_error_m: float, sideslip_deg: float) -> AbortLimits:
+        """From the plant parameters (m, deg)."""
+        return cls(float(lateral_error_m), math.radians(float(sideslip_deg)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,8 +82,6 @@ class Scenario:
     initial: InitialState
     end_x_m: float | None
     duration_s: float | None
-    abort_lateral_error_m: float
-    abort_sideslip_rad: float
     allow_over_mu: bool
     peak_lat_accel_demand_mps2: float
     mu_g_mps2: float
@@ -92,10 +106,10 @@ class Scenario:
             f"= {self.demand_ratio:.2f} μg (μ = {mu:g})"
         )
 
-    def check_end(self, out: PlantOutputs) -> tuple[bool, str]:
+    def check_end(self, out: PlantOutputs, abort: AbortLimits) -> tuple[bool, str]:
         """(done, reason). Normal ends: end_x_m reached, duration reached, end of the path;
-        aborts (reason starts with ``"aborted:"``): |lateral error| or |sideslip| beyond the
-        abort limits. (False, "") while the run goes on.
+        aborts (reason starts with ``"aborted:"``): |lateral error| or |sideslip| beyond
+        ``abort``. (False, "") while the run goes on.
 
         The lateral error is measured at the path sample nearest to the car, found by a
         windowed search around the previous call's answer (full search on the first call and
@@ -104,12 +118,12 @@ class Scenario:
         the default spacing) between calls, i.e. unless the path comes back near itself."""
         i = self._path_index.nearest(out.x, out.y)
         e = lateral_error(self.path, out.x, out.y, i)
-        if abs(e) > self.abort_lateral_error_m:
+        if abs(e) > abort.lateral_error_m:
             return True, (f"aborted: lateral error {e:+.2f} m beyond "
-                          f"±{self.abort_lateral_error_m:g} m")
-        if out.vx > 1.0 and abs(out.sideslip) > self.abort_sideslip_rad:
+                          f"±{abort.lateral_error_m:g} m")
+        if out.vx > 1.0 and abs(out.sideslip) > abort.sideslip_rad:
             return True, (f"aborted: sideslip {math.degrees(out.sideslip):+.1f}° beyond "
-                          f"±{math.degrees(self.abort_sideslip_rad):g}°")
+                          f"±{math.degrees(abort.sideslip_rad):g}°")
         if self.end_x_m is not None and out.x >= self.end_x_m:
             return True, f"end of scenario: X = {out.x:.1f} m ≥ end_x_m = {self.end_x_m:g} m"
         if self.duration_s is not None and out.t_s >= self.duration_s - 1e-9:
@@ -239,12 +253,6 @@ def scenario_from_mapping(
         speed=_number("initial.", "speed_kmh", ini.get("speed_kmh", speed * 3.6), 0.0,
                       250.0) / 3.6,
     )
-    abort = _sub(data, "abort", ABORT_KEYS)
-    abort_e = _number("abort.", "lateral_error_m",
-                      abort.get("lateral_error_m", DEFAULT_ABORT_LATERAL_ERROR_M), 0.01)
-    abort_beta = math.radians(_number("abort.", "sideslip_deg",
-                                      abort.get("sideslip_deg", DEFAULT_ABORT_SIDESLIP_DEG),
-                                      0.1, 90.0))
 
     demand = peak_lateral_accel_demand(path)
     mu_g = road.mu_min() * vehicle.gravity_mps2
@@ -258,8 +266,6 @@ def scenario_from_mapping(
         initial=initial,
         end_x_m=end_x,
         duration_s=duration,
-        abort_lateral_error_m=abort_e,
-        abort_sideslip_rad=abort_beta,
         allow_over_mu=allow,
         peak_lat_accel_demand_mps2=demand,
         mu_g_mps2=mu_g,

@@ -181,10 +181,3 @@ class Simulator:
             ]
         self._y = y
         self._n_sub += n
-
-    def check_end(
-        self, scenario: Scenario, outputs: PlantOutputs | None = None
-    ) -> tuple[bool, str]:
-        """(done, reason) for the scenario at the current outputs; see
-        :meth:`Scenario.check_end`."""
-        return scenario.check_end(outputs if outputs is not None else self.outputs())
