@@ -22,7 +22,9 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-PRESETS = ["mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc"]
+from fourws_bringup.paper import PAPER_RUNS  # noqa: E402
+
+PRESETS = list(dict.fromkeys(c for c, _ in PAPER_RUNS))  # the paper's order
 PAPER = ["dlc_60_mu05", "dlc_90_mu06"]
 
 

@@ -7,14 +7,27 @@ from pathlib import Path
 import pytest
 from params_helpers import core_keys
 
+from fourws_bringup.core.configs import list_controllers
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
 from fourws_mpc.core.config import MpcConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 MPC_YAML = config_dir("fourws_mpc") / "mpc.yaml"
-PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc")
+#: what each shipped preset must be (section 4 of the paper)
+EXPECTED = {
+    "mpc_fws": (False, False, "fixed", "fixed", "equal"),
+    "mpc_4ws": (True, False, "fixed", "fixed", "equal"),
+    "improved": (True, True, "fuzzy", "apcha", "optimal"),
+    "ampc_4ws": (True, False, "fuzzy", "apcha", "equal"),
+    "ampc_4ws_dyc": (True, True, "fuzzy", "apcha", "rule"),
+}
+PRESETS = list_controllers()
 
+
+
+def test_every_shipped_preset_is_checked():
+    assert sorted(EXPECTED) == PRESETS
 
 
 def _preset(name):
@@ -35,13 +48,7 @@ def test_mpc_yaml_holds_every_default():
 def test_presets_load(name):
     cfg, alloc = _preset(name)
     assert cfg.controller == name
-    expected = {
-        "mpc_fws": (False, False, "fixed", "fixed", "equal"),
-        "mpc_4ws": (True, False, "fixed", "fixed", "equal"),
-        "improved": (True, True, "fuzzy", "apcha", "optimal"),
-        "ampc_4ws": (True, False, "fuzzy", "apcha", "equal"),
-        "ampc_4ws_dyc": (True, True, "fuzzy", "apcha", "rule"),
-    }[name]
+    expected = EXPECTED[name]
     assert (cfg.use_rear_steer, cfg.use_dyc, cfg.weights_mode, cfg.horizons_mode,
             alloc["method"]) == expected
 

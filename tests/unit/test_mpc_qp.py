@@ -234,6 +234,9 @@ class _RecordingSolver:
         self.seen.append(qp)
         return self.inner.solve(qp, warm_x)
 
+    def reset(self):
+        self.inner.reset()
+
 
 def test_injected_solver_gets_the_condensed_qp_and_gives_the_same_answer():
     z, u, Ak, Bk, dk = _model(3)

@@ -26,7 +26,11 @@ WIRING = ["fourws_sim/fourws_sim/plant_node.py", "fourws_mpc/fourws_mpc/mpc_node
           "fourws_bringup/fourws_bringup/recorder_node.py",
           "fourws_bringup/fourws_bringup/replay_node.py",
           "fourws_common/fourws_common/health.py",
-          "fourws_bringup/fourws_bringup/bag/run_data.py"]
+          "fourws_bringup/fourws_bringup/bag/run_data.py",
+          "fourws_common/fourws_common/state_input.py",
+          "fourws_bringup/fourws_bringup/runner.py", "fourws_bringup/fourws_bringup/report.py"]
+#: the one QoS profile a node names itself: the controllers' subscriber-side keep-last-1
+SUBSCRIBER_SIDE = {"LATEST_QOS"}
 
 
 def test_qos_kinds_keep_their_values():
@@ -97,3 +101,12 @@ def _literals(tree: ast.AST) -> set[str]:
 def test_nodes_take_topic_names_from_the_table(path):
     tree = ast.parse((SRC / path).read_text(encoding="utf-8"))
     assert not _literals(tree) & set(TOPICS), path
+
+
+@pytest.mark.parametrize("path", WIRING)
+def test_nodes_take_each_topics_qos_from_the_table(path):
+    """A topic's profile comes from its kind (``qos.qos_of``), never picked by hand."""
+    text = (SRC / path).read_text(encoding="utf-8")
+    names = {n.id for n in ast.walk(ast.parse(text)) if isinstance(n, ast.Name)}
+    hand = {n for n in names if n.endswith("_QOS")} - SUBSCRIBER_SIDE
+    assert not hand, f"{path} picks QoS profiles by hand: {sorted(hand)}"

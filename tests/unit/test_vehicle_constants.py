@@ -68,3 +68,12 @@ def test_a_mismatch_study_is_an_explicit_override():
     changed = [f.name for f in dataclasses.fields(nominal)
                if getattr(nominal, f.name) != getattr(heavy, f.name)]
     assert changed == ["mass_kg"]
+
+
+def test_one_control_period_for_plant_and_controllers():
+    from fourws_bringup.core.configs import plant_values
+    from fourws_bringup.scoring import DEADLINE_MS
+
+    dt = plant_values()["dt_s"]
+    assert load_mpc_config("improved").dt_s == dt
+    assert DEADLINE_MS == pytest.approx(dt * 1e3)

@@ -1,8 +1,9 @@
 """Recorder node: every topic of the graph, serialized as received, into a rosbag2-layout MCAP bag.
 
 Subscribes to each topic in ``topics`` with ``raw=True`` (no decode, no re-encode) and the QoS
-its publisher offers (``fourws_common.qos``: CONTROL_QOS per step, LATCHED_QOS for
-``/reference/*`` and ``/run/status``, CLOCK_QOS for ``/clock``), and appends every message to
+its publisher offers (the topic table's QoS kind, ``fourws_common.topics``: control per step,
+latched for ``/reference/*`` and ``/run/status``, clock for ``/clock``, diagnostics for
+``/diagnostics``), and appends every message to
 ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`: ``log_time`` = wall receive
 time (ns), ``publish_time`` = header stamp (receive time for ``/run/status``).
 

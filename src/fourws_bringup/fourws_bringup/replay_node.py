@@ -39,7 +39,7 @@ from rosgraph_msgs.msg import Clock
 from fourws_common.conversions import ns_to_stamp
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, PROFILES, profile_from_dict
+from fourws_common.qos import PROFILES, profile_from_dict, qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import CLOCK, RUN_STATUS, TOPICS, VEHICLE_STATE, qos_kind
 
@@ -117,7 +117,7 @@ class ReplayNode(Node):
             self.stamped[t] = first_field_is_stamp(ch.definition)
         self.clock_pub = None
         if cfg.publish_clock and CLOCK.name not in self.topics:
-            self.clock_pub = self.create_publisher(Clock, CLOCK.name, CLOCK_QOS)
+            self.clock_pub = self.create_publisher(Clock, CLOCK.name, qos_of(CLOCK))
         self.lockstep = bool(cfg.lockstep_topic)
         self.answered: set[int] = set()
         self.lockstep_misses = 0
@@ -130,7 +130,7 @@ class ReplayNode(Node):
             if cfg.lockstep_trigger not in self.topics:
                 raise ValueError(f"lockstep_trigger: {cfg.lockstep_trigger} is not replayed")
             self.create_subscription(message_class(ltype), cfg.lockstep_topic, self._on_answer,
-                                     CONTROL_QOS, raw=True)
+                                     PROFILES[qos_kind(cfg.lockstep_topic)], raw=True)
         self._messages = self.bag.messages(self.topics)
         self._next = None
         self.counts = {t: 0 for t in self.topics}

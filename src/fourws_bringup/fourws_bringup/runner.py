@@ -237,7 +237,7 @@ class _Monitor:
         import rclpy
         from std_msgs.msg import String
 
-        from fourws_common.qos import LATCHED_QOS
+        from fourws_common.qos import qos_of
 
         self._rclpy = rclpy
         self.ctx = rclpy.Context()
@@ -248,7 +248,7 @@ class _Monitor:
         self.wall_time_s: float | None = None  # the plant's, from its first answered state
         self.ended_wall: float | None = None
         self.status: dict = {}
-        self.node.create_subscription(String, RUN_STATUS.name, self._on_status, LATCHED_QOS)
+        self.node.create_subscription(String, RUN_STATUS.name, self._on_status, qos_of(RUN_STATUS))
         from rclpy.experimental import EventsExecutor
 
         self.ex = EventsExecutor(context=self.ctx)

@@ -17,7 +17,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog
-from fourws_common.qos import DIAGNOSTICS_QOS
+from fourws_common.qos import qos_of
 from fourws_common.topics import DIAGNOSTICS
 
 #: steady-clock period (s) of the change check; a change is published within this time.
@@ -34,7 +34,7 @@ class NodeHealth:
         self._published: dict[str, int] | None = None
         self._since_publish_s = 0.0
         self._period_s = period_s
-        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, DIAGNOSTICS_QOS)
+        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos_of(DIAGNOSTICS))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = node.create_timer(CHANGE_POLL_S, self._tick, clock=steady)
 

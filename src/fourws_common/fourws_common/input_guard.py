@@ -59,8 +59,13 @@ def implausible_fields(msg: Any, names: Iterable[str],
     or arrays) that are not finite or lie outside their range; empty if all are plausible."""
     bad = []
     for k in names:
-        v = np.asarray(getattr(msg, k), dtype=float)
+        raw = getattr(msg, k)
         lo, hi = limits.get(k, (-math.inf, math.inf))
+        if isinstance(raw, float | int):  # the per-step scalars, without numpy's overhead
+            if not (math.isfinite(raw) and lo <= raw <= hi):
+                bad.append(f"{k}={float(raw):.6g} (range {lo:g}..{hi:g})")
+            continue
+        v = np.asarray(raw, dtype=float)
         ok = np.isfinite(v) & (v >= lo) & (v <= hi)
         if not np.all(ok):
             worst = v.reshape(-1)[int(np.argmin(ok.reshape(-1)))]

@@ -14,7 +14,7 @@ from typing import Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from fourws_common.topics import QOS_KINDS
+from fourws_common.topics import QOS_KINDS, Topic
 
 
 def profile_from_dict(q: Mapping[str, Any]) -> QoSProfile:
@@ -49,3 +49,8 @@ LATCHED_QOS = PROFILES["latched"]
 CLOCK_QOS = PROFILES["clock"]
 LATEST_QOS = PROFILES["latest"]
 DIAGNOSTICS_QOS = PROFILES["diagnostics"]
+
+
+def qos_of(topic: Topic) -> QoSProfile:
+    """The profile a topic of the table is offered and subscribed with (its QoS kind)."""
+    return PROFILES[topic.qos]

@@ -32,7 +32,7 @@ from rclpy.node import Node
 
 from fourws_common.health import NodeHealth
 from fourws_common.node_main import run_node
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.state_input import StateHandlers, StateInput
 from fourws_common.topics import (
@@ -41,12 +41,11 @@ from fourws_common.topics import (
     REFERENCE_TRAJECTORY,
 )
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.controller import MpcController, VehicleSample
+from fourws_mpc.core.controller import MEAS_FIELDS, MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
-STATE_FIELDS = ("x", "y", "yaw", "vx", "vy", "yaw_rate")
-CHECKED_FIELDS = (*STATE_FIELDS, "mu")
+CHECKED_FIELDS = (*MEAS_FIELDS, "mu")
 
 
 class MpcNode(Node):
@@ -58,15 +57,15 @@ class MpcNode(Node):
         self.ref_msg: ReferenceTrajectory | None = None
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
-        self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.name, CONTROL_QOS)
+        self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.name, qos_of(MPC_COMMAND))
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
         self._cmd_msg, self._diag_msg = MpcCommand(), MpcDiagnostics()
         self.pub_diag = self.create_publisher(MpcDiagnostics, MPC_DIAGNOSTICS.name,
-                                              CONTROL_QOS)
+                                              qos_of(MPC_DIAGNOSTICS))
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
-                                 LATCHED_QOS)
+                                 qos_of(REFERENCE_TRAJECTORY))
         self.state_input = StateInput(
             self, self.health, CHECKED_FIELDS,
             StateHandlers(ready=lambda: self.ref is not None, step=self._step,

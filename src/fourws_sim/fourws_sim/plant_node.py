@@ -64,7 +64,7 @@ from fourws_common.conversions import (
 from fourws_common.exit_codes import ExitCode
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CLOCK_QOS, CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import (
     CLOCK,
@@ -161,13 +161,14 @@ class PlantNode(Node):
         self.clip_log = RateLimitedLog(log.warning)
         self.late_log = RateLimitedLog(log.warning)
 
-        self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.name, CONTROL_QOS)
-        self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.name, CONTROL_QOS)
-        self.pub_clock = self.create_publisher(Clock, CLOCK.name, CLOCK_QOS)
+        self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.name,
+                                               qos_of(VEHICLE_STATE))
+        self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.name, qos_of(VEHICLE_ODOM))
+        self.pub_clock = self.create_publisher(Clock, CLOCK.name, qos_of(CLOCK))
         self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
-                                             LATCHED_QOS)
-        self.pub_path = self.create_publisher(Path, REFERENCE_PATH.name, LATCHED_QOS)
-        self.pub_status = self.create_publisher(String, RUN_STATUS.name, LATCHED_QOS)
+                                             qos_of(REFERENCE_TRAJECTORY))
+        self.pub_path = self.create_publisher(Path, REFERENCE_PATH.name, qos_of(REFERENCE_PATH))
+        self.pub_status = self.create_publisher(String, RUN_STATUS.name, qos_of(RUN_STATUS))
         # Per-step messages are built once and refilled: every field is set before each
         # publish (which serialises at once), and Odometry's constructor alone costs ~40 µs.
         self._state_msg = VehicleState()
@@ -176,9 +177,9 @@ class PlantNode(Node):
         self._odom_msg = Odometry()
         self._odom_msg.header = self._state_msg.header
         self._odom_msg.child_frame_id = "base_link"
-        self.create_subscription(MpcCommand, MPC_COMMAND.name, self._on_mpc, CONTROL_QOS)
+        self.create_subscription(MpcCommand, MPC_COMMAND.name, self._on_mpc, qos_of(MPC_COMMAND))
         self.create_subscription(WheelTorques, WHEEL_TORQUES.name, self._on_torques,
-                                 CONTROL_QOS)
+                                 qos_of(WHEEL_TORQUES))
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
         log.info(f"mode {cfg.mode}, dt {cfg.dt_s} s, substep {cfg.substep_s} s")

@@ -34,7 +34,7 @@ from fourws_common.input_guard import (
 )
 from fourws_common.node_main import run_node
 from fourws_common.params import param
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS, LATEST_QOS
+from fourws_common.qos import LATEST_QOS, qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import (
     DRIVE_COMMAND,
@@ -81,18 +81,18 @@ class AllocatorNode(Node):
         self.last_valid = np.zeros(4)
         self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
         self.health = NodeHealth(self)
-        self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.name, CONTROL_QOS)
+        self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.name, qos_of(WHEEL_TORQUES))
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
-                                 LATCHED_QOS)
+                                 qos_of(REFERENCE_TRAJECTORY))
         self.create_subscription(VehicleState, VEHICLE_STATE.name,
                                  self.health.guard(VEHICLE_STATE.name, self._on_state),
                                  LATEST_QOS)
         self.create_subscription(DriveCommand, DRIVE_COMMAND.name,
-                                 lambda m: self._on_input(self.drives, m), CONTROL_QOS)
+                                 lambda m: self._on_input(self.drives, m), qos_of(DRIVE_COMMAND))
         self.create_subscription(MpcCommand, MPC_COMMAND.name,
-                                 lambda m: self._on_input(self.mpcs, m), CONTROL_QOS)
+                                 lambda m: self._on_input(self.mpcs, m), qos_of(MPC_COMMAND))
         self.get_logger().info(f"allocation method '{self.params.config.method}'")
 
     def _on_params(self, cfg: AllocatorNodeConfig) -> None:

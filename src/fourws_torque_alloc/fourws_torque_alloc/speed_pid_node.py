@@ -19,7 +19,7 @@ from rclpy.node import Node
 from fourws_common.health import NodeHealth
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.state_input import StateHandlers, StateInput
 from fourws_common.topics import DRIVE_COMMAND, REFERENCE_TRAJECTORY
@@ -39,11 +39,11 @@ class SpeedPidNode(Node):
         self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
-        self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.name, CONTROL_QOS)
+        self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.name, qos_of(DRIVE_COMMAND))
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
-                                 LATCHED_QOS)
+                                 qos_of(REFERENCE_TRAJECTORY))
         self.state_input = StateInput(
             self, self.health, ("x", "y", "vx"),
             StateHandlers(ready=lambda: self.profile is not None, step=self._step,

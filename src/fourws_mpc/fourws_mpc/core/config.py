@@ -20,7 +20,9 @@ from fourws_common.params import from_mapping, param
 from fourws_mpc.core.apcha import ApchaParams
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
-from fourws_mpc.core.reference import Reference
+from fourws_mpc.core.prediction_model import PREDICTION_MODELS
+from fourws_mpc.core.qp_solver import QP_SOLVERS
+from fourws_mpc.core.reference import SEARCH_AHEAD, SEARCH_BACK, Reference
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,7 @@ class MpcConfig:
     # prediction model, eq. (1)
     prediction_model: str = param("single_track", "prediction model behind the model seam "
                                   "(prediction_model.PREDICTION_MODELS)",
-                                  choices=("single_track",))
+                                  choices=tuple(PREDICTION_MODELS))
     mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
     yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", lo=1.0, hi=1e6, unit="kg*m^2")
     cg_to_front_axle_m: float = param(1.10, "CG to front axle a", lo=0.01, hi=10.0, unit="m")
@@ -133,7 +135,7 @@ class MpcConfig:
                         unit="s")
     # solver
     qp_solver: str = param("osqp", "QP solver behind the solver seam (qp_solver.QP_SOLVERS)",
-                           choices=("osqp",))
+                           choices=tuple(QP_SOLVERS))
     osqp_eps_abs: float = param(1e-4, "OSQP absolute tolerance", lo=1e-10, hi=1.0)
     osqp_eps_rel: float = param(1e-4, "OSQP relative tolerance", lo=1e-10, hi=1.0)
     osqp_max_iter: int = param(4000, "OSQP iteration limit", lo=10, hi=1000000)
@@ -143,10 +145,10 @@ class MpcConfig:
     osqp_accept_inaccurate: bool = param(False, "trust OSQP status 'solved inaccurate'")
     osqp_prebuild: bool = param(True, "set up the OSQP instance of every reachable (N_p, N_c) "
                                 "at start-up (no set-up cost inside the control loop)")
-    ref_search_back: int = param(50, "nearest-point window behind the last index", lo=1,
+    ref_search_back: int = param(SEARCH_BACK, "nearest-point window behind the last index", lo=1,
                                  hi=1000000, unit="samples")
-    ref_search_ahead: int = param(400, "nearest-point window ahead of the last index", lo=2,
-                                  hi=1000000, unit="samples")
+    ref_search_ahead: int = param(SEARCH_AHEAD, "nearest-point window ahead of the last "
+                                  "index", lo=2, hi=1000000, unit="samples")
 
     def __post_init__(self) -> None:
         if self.np_min > self.np_max:

@@ -34,13 +34,14 @@ The core never reads a clock.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from fourws_common.input_guard import STATE_LIMITS
+from fourws_common.input_guard import implausible_fields
 from fourws_mpc.core.apcha import apcha, integrated_error
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
@@ -52,7 +53,6 @@ from fourws_mpc.core.qp_solver import QpSettings, QpSolver, make_qp_solver
 from fourws_mpc.core.reference import NearestPoint, Reference
 
 G = 9.81
-_MEAS_FIELDS = ("x", "y", "yaw", "vx", "vy", "yaw_rate")
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +73,10 @@ class VehicleSample:
         """The sample of an object with attributes x, y, yaw, vx, vy, yaw_rate."""
         return cls(float(obj.x), float(obj.y), float(obj.yaw), float(obj.vx), float(obj.vy),
                    float(obj.yaw_rate))
+
+
+#: the fields of :class:`VehicleSample`, in order (what a node reads from its state message)
+MEAS_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleSample))
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,8 +165,11 @@ class MpcController:
                           check_termination=c.osqp_check_termination)
 
     def _new_qp(self, c: MpcConfig, settings: QpSettings) -> MpcQp:
-        """A fresh QP (and solver state); every reachable (N_p, N_c) set up if prebuilding."""
+        """A fresh QP and solver state (an injected solver is reset; it keeps its own
+        settings); every reachable (N_p, N_c) set up if prebuilding."""
         solver = self._injected_solver
+        if solver is not None:
+            solver.reset()
         qp = MpcQp(settings, solver if solver is not None else
                    make_qp_solver(c.qp_solver, settings))
         if c.osqp_prebuild:
@@ -260,15 +267,11 @@ class MpcController:
         if not isinstance(state, VehicleSample):
             raise TypeError(f"state: a VehicleSample, got {type(state).__name__} "
                             "(VehicleSample.of(obj) builds one)")
-        for name in _MEAS_FIELDS:
-            v = getattr(state, name)
-            if not math.isfinite(v):
-                raise ValueError(f"state {name}: not finite ({v!r})")
-            lo, hi = STATE_LIMITS[name]
-            if not lo <= v <= hi:
-                # finite but absurd (x = 1e300): it would overflow the projection and the QP
-                raise ValueError(f"state {name}: {v!r} outside the plausible range "
-                                 f"{lo:g}..{hi:g}")
+        # non-finite, or finite but absurd (x = 1e300: it would overflow the projection and
+        # the QP): the same rule as the nodes' input guard
+        bad = implausible_fields(state, MEAS_FIELDS)
+        if bad:
+            raise ValueError(f"state: not finite or implausible: {', '.join(bad)}")
         if mu is not None and not math.isfinite(mu):
             raise ValueError(f"mu: not finite ({mu!r})")
         return state

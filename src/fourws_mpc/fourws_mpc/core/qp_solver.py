@@ -136,6 +136,10 @@ class QpSolver(Protocol):
     def solve(self, qp: CondensedQp, warm_x: np.ndarray | None) -> QpResult:
         """Solve ``qp``; ``warm_x`` (nz,) an optional primal warm start."""
 
+    def reset(self) -> None:
+        """Forget everything learnt between solves (warm starts, adapted step sizes), so the
+        next solves equal those of a new solver."""
+
 
 def trusted(status: QpStatus, x: np.ndarray | None, accept_inaccurate: bool) -> bool:
     """The one status rule: optimal (or optimal-inaccurate when accepted) and finite."""
@@ -190,6 +194,10 @@ class OsqpSolver:
             check_termination=s.check_termination,
         )
         self.instances[pattern.key] = solver
+
+    def reset(self) -> None:
+        """Drop every instance (their adapted ρ and duals); patterns are set up again."""
+        self.instances.clear()
 
     def solve(self, qp: CondensedQp, warm_x: np.ndarray | None) -> QpResult:
         """Update the pattern's instance in place, warm-start, solve. A failed solve resets

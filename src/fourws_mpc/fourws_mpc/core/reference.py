@@ -36,6 +36,10 @@ from fourws_common.input_guard import check_reference
 from fourws_common.path_lookup import windowed_search
 
 TWO_PI = 2.0 * math.pi
+#: default nearest-point window (samples behind / ahead of the last index; MpcConfig's
+#: ref_search_back / ref_search_ahead)
+SEARCH_BACK = 50
+SEARCH_AHEAD = 400
 
 
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
@@ -83,12 +87,12 @@ class Reference:
     curvature: np.ndarray
     speed: np.ndarray
     s: np.ndarray
-    search_back: int = 50
-    search_ahead: int = 400
+    search_back: int = SEARCH_BACK
+    search_ahead: int = SEARCH_AHEAD
 
     @classmethod
-    def from_arrays(cls, x, y, yaw, curvature, speed, *, search_back: int = 50,
-                    search_ahead: int = 400) -> Reference:
+    def from_arrays(cls, x, y, yaw, curvature, speed, *, search_back: int = SEARCH_BACK,
+                    search_ahead: int = SEARCH_AHEAD) -> Reference:
         """Validate and build. Arrays of one length N ≥ 2, finite, distinct consecutive points.
 
         Raises ``ValueError`` naming the bad array (also for absurd magnitudes,

@@ -99,6 +99,9 @@ _MAX_MU = 3.0
 _MAX_FORCE_N = 1.0e6
 _UNMET_REL_TOL = 1.0e-9
 _RESIDUAL_TOL = 1.0e-6
+#: ``info.status_polish`` of a successful polish (OSQP exports no enum for it: 1 success,
+#: 0 unperformed, -1 unsuccessful)
+OSQP_POLISH_SUCCESSFUL = 1
 
 
 _FL, _FR, _RL, _RR = Wheel.FL, Wheel.FR, Wheel.RL, Wheel.RR
@@ -366,6 +369,8 @@ class BoundedQp:
         import osqp
         import scipy.sparse as sp
 
+        self._status = osqp.SolverStatus
+
         p = sp.triu(sp.identity(4, format="csc")).tocsc()
         a = sp.csc_matrix(np.vstack([[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0], np.eye(4)]))
         self._l = np.zeros(6)
@@ -420,7 +425,8 @@ class BoundedQp:
         self._solver.update(Px=px, l=l, u=u)
         res = self._solver.solve(raise_error=False)
         self.last_status = str(res.info.status)
-        if res.info.status_val != 1 or res.info.status_polish != 1 or res.x is None:
+        solved = self._status(res.info.status_val) is self._status.OSQP_SOLVED
+        if not solved or res.info.status_polish != OSQP_POLISH_SUCCESSFUL or res.x is None:
             return None
         x = [_clip(float(res.x[i]) * scale, -bounds[i], bounds[i]) for i in range(4)]
         if not all(math.isfinite(v) for v in x):
