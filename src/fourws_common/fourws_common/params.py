@@ -156,3 +156,11 @@ def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[key] = v
     return out
+
+
+def choose(registry: Mapping[str, T], name: str, key: str) -> T:
+    """``registry[name]`` for a parameter ``key`` that names one of the registry's entries;
+    ``ValueError`` naming the parameter and the known names otherwise."""
+    if name not in registry:
+        raise ValueError(f"{key}: unknown '{name}' (known: {', '.join(registry)})")
+    return registry[name]

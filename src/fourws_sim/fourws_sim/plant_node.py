@@ -44,6 +44,7 @@ import math
 import os
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
@@ -223,46 +224,48 @@ class PlantNode(Node):
                         f"holding the last valid torques")
         return None
 
-    def _on_mpc(self, msg: MpcCommand) -> None:
+    def _command_stamp(self, msg: Any, what: str, held_ns: int | None) -> int | None:
+        """The stamp of a command to take, or None (logged where it is news) to ignore it.
+        Lockstep: only the current step's. Realtime: not ahead of the plant, and not older
+        than the command held (out of order)."""
         if self.ended:
+            return None
+        stamp = stamp_to_ns(msg.header.stamp)
+        now = self.step_k * self.dt_ns
+        if self.params.config.mode != "realtime":
+            if stamp != now:
+                self.stamp_log(self._now_ns(), f"ignored {what} stamped {stamp} ns while at "
+                               f"step {self.step_k}")
+                return None
+            return stamp
+        if stamp > now:
+            self.stamp_log(self._now_ns(), f"ignored {what} stamped {stamp} ns: ahead of the "
+                           f"plant (step {self.step_k})")
+            return None
+        if held_ns is not None and stamp < held_ns:
+            return None
+        return stamp
+
+    def _on_mpc(self, msg: MpcCommand) -> None:
+        stamp = self._command_stamp(msg, "mpc_command", self.cmd_stamp_ns)
+        if stamp is None:
             return
         if self.params.config.mode == "realtime":
-            stamp = stamp_to_ns(msg.header.stamp)
-            if stamp > self.step_k * self.dt_ns:
-                self.stamp_log(self._now_ns(), f"ignored mpc_command stamped {stamp} ns: "
-                               f"ahead of the plant (step {self.step_k})")
-                return
-            if self.cmd_stamp_ns is not None and stamp < self.cmd_stamp_ns:
-                return  # older than the command held: out of order
             if self._valid_cmd(msg):
                 self.steer_cmd = (msg.delta_front, msg.delta_rear)
                 self.cmd_stamp_ns = stamp
-            return
-        if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
-            self.stamp_log(self._now_ns(), f"ignored mpc_command stamped "
-                           f"{stamp_to_ns(msg.header.stamp)} ns while at step {self.step_k}")
             return
         self.pending_cmd = msg
         self._try_step()
 
     def _on_torques(self, msg: WheelTorques) -> None:
-        if self.ended:
+        stamp = self._command_stamp(msg, "wheel_torques", self.torque_stamp_ns)
+        if stamp is None:
             return
         if self.params.config.mode == "realtime":
-            stamp = stamp_to_ns(msg.header.stamp)
-            if stamp > self.step_k * self.dt_ns:
-                self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped {stamp} ns: "
-                               f"ahead of the plant (step {self.step_k})")
-                return
-            if self.torque_stamp_ns is not None and stamp < self.torque_stamp_ns:
-                return
             if (t := self._valid_torques(msg)) is not None:
                 self.torque_cmd = t
                 self.torque_stamp_ns = stamp
-            return
-        if stamp_to_ns(msg.header.stamp) != self.step_k * self.dt_ns:
-            self.stamp_log(self._now_ns(), f"ignored wheel_torques stamped "
-                           f"{stamp_to_ns(msg.header.stamp)} ns while at step {self.step_k}")
             return
         self.pending_torque = msg
         self._try_step()

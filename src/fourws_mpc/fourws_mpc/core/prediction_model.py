@@ -16,6 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
+from fourws_common.params import choose
 from fourws_mpc.core.model import ModelParams, discretise
 
 
@@ -50,8 +51,4 @@ PREDICTION_MODELS: dict[str, Callable[[ModelParams], PredictionModel]] = {
 
 def make_prediction_model(name: str, params: ModelParams) -> PredictionModel:
     """The model called ``name`` (:data:`PREDICTION_MODELS`)."""
-    try:
-        return PREDICTION_MODELS[name](params)
-    except KeyError:
-        raise ValueError(f"prediction_model: unknown model '{name}' (known: "
-                         f"{', '.join(PREDICTION_MODELS)})") from None
+    return choose(PREDICTION_MODELS, name, "prediction_model")(params)

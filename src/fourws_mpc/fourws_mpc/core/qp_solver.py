@@ -28,6 +28,8 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from fourws_common.params import choose
+
 OSQP_INFTY = float(osqp.constant("OSQP_INFTY"))  # OSQP's infinity (1e30)
 _INF = np.inf
 
@@ -232,8 +234,4 @@ QP_SOLVERS: dict[str, Callable[[QpSettings], QpSolver]] = {"osqp": OsqpSolver}
 
 def make_qp_solver(name: str, settings: QpSettings) -> QpSolver:
     """The solver called ``name`` (:data:`QP_SOLVERS`)."""
-    try:
-        return QP_SOLVERS[name](settings)
-    except KeyError:
-        raise ValueError(f"qp_solver: unknown solver '{name}' (known: "
-                         f"{', '.join(QP_SOLVERS)})") from None
+    return choose(QP_SOLVERS, name, "qp_solver")(settings)

@@ -75,6 +75,7 @@ import math
 from enum import IntEnum
 from typing import Any
 
+from fourws_sim.core.tyre import forces_scalar
 from fourws_sim.core.vehicle_params import SIGMA_MIN_M, VehicleParams
 
 
@@ -266,22 +267,6 @@ def _tyre_forces(
 ) -> tuple[float, float]:
     """Combined-slip forces of one wheel in plain floats from its wheel-frame forward
     velocity ``vxw``, slip denominator ``den`` = max(|vxw|, v_min), slip angle ``alpha``
-    (rad, tyre.slips sign) and rim speed ``omega_r``; inlined copy of
-    :func:`fourws_sim.core.tyre.forces_scalar` (tested equal)."""
-    ky1_fz0, inv_ky2_fz0, p_d2, inv_fz0, c_kx, cy, ey, uy, cx, ex, ux = k
-    lam = 1.0 + p_d2 * (fz * inv_fz0 - 1.0)
-    lam = 1.0 if lam > 1.0 else (0.1 if lam < 0.1 else lam)
-    d = mu * fz * lam
-    if d <= 0.0:
-        return 0.0, 0.0
-    k_a = ky1_fz0 * math.sin(2.0 * math.atan(fz * inv_ky2_fz0))
-    sx = (omega_r - vxw) / den * c_kx * fz / (ux * cx * d)
-    sy = alpha * k_a / (uy * cy * d)
-    rho = math.sqrt(sx * sx + sy * sy)
-    if rho < 1e-12:
-        return d * sx * cx * ux, d * sy * cy * uy
-    u = rho * ux
-    gx = math.sin(cx * math.atan(u - ex * (u - math.atan(u)))) / rho
-    u = rho * uy
-    gy = math.sin(cy * math.atan(u - ey * (u - math.atan(u)))) / rho
-    return d * sx * gx, d * sy * gy
+    (rad, tyre.slips sign) and rim speed ``omega_r``: the slip ratio of ``tyre.slips``, then
+    :func:`fourws_sim.core.tyre.forces_scalar`."""
+    return forces_scalar((omega_r - vxw) / den, alpha, fz, mu, k)
