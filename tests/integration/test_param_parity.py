@@ -4,9 +4,9 @@ Each controller node is built in a process of its own from the very ``--params-f
 runner passes (``configs.params_files``) plus a ``-p`` override of every core parameter (a
 value other than the file's), and prints the configuration its core got; it must equal what
 ``fourws_bringup.core.configs`` loads for the in-process loop with the same overrides. For
-the MPC the reference it builds from a ReferenceTrajectory is checked too: before issue 16
-``mpc_node`` dropped ``ref_search_back``/``ref_search_ahead`` there, so changing them moved
-only the in-process loop.
+the MPC the reference it builds from a ReferenceTrajectory is checked too: ``mpc_node`` once
+dropped ``ref_search_back``/``ref_search_ahead`` there (fixed in 7b806b8), so changing them
+moved only the in-process loop; this test would have caught it.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""vehicle.yaml ↔ VehicleParams, ranges, cross-field rules, and the purity of the sim core."""
+"""vehicle.yaml ↔ VehicleParams, ranges and cross-field rules."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Figures and Markdown pieces of a run report, from recorded runs (:class:`bag.RunData`).
+"""Figures and Markdown pieces of a run report, from recorded runs (:class:`bag.run_data.RunData`).
 
 Figures (matplotlib, Agg, PNG), as in the paper:
 

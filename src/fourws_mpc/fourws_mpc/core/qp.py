@@ -21,7 +21,7 @@ i = 1 to Nc−1, one increment short; docs/mpc.md, "Deviations from the paper"):
     J = Σ_{i=1..Np} ‖y_i − y_ref,i‖²_Q + Σ_{j=0..Nc−1} ‖Δu_j‖²_R + ρ ε²
 
 Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
-by the squares of the characteristic sizes of the cost scaling, see ``controller.py``). The QP
+by the squares of the characteristic sizes of the cost scaling, see ``cost_scaling.py``). The QP
 variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
 increment is in [−1, 1] and the problem is well scaled; ε ≥ 0 is one dimensionless slack.
 
