@@ -29,8 +29,6 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     from fourws_common.exit_codes import ExitCode
     from fourws_sim.core.scenario import load_scenario
 
-    from .bag.run_data import read_run
-    from .report import draw_figures
     from .runner import RunError, controller_preset, prepare_out_dir, run_graph
     from .scoring import score_run, write_metrics
 
@@ -57,6 +55,9 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     write_metrics(out_dir, metrics)
     if plots and (out_dir / "bag").exists():
         try:
+            from .bag.run_data import read_run
+            from .report import draw_figures  # matplotlib: only when figures are drawn
+
             draw_figures(read_run(out_dir), out_dir / "plots")
         except Exception as exc:  # noqa: BLE001
             print(f"[fourws] figures failed: {exc}", file=sys.stderr)
