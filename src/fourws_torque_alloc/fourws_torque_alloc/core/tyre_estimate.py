@@ -1,0 +1,84 @@
+"""Per-wheel F_z, F_y and μ without plant truth: what a car's controller can know.
+
+From the measured accelerations a_x, a_y (IMU, m/s², ISO body frame) and the controller's own
+nominal vehicle constants (the plant's names, ``vehicle.yaml``):
+
+* **F_z**, static load plus quasi-static load transfer (a rigid body; the roll stiffness
+  splits the lateral transfer between the axles)::
+
+      F_z,front = m g b/(2L) − m h a_x/(2L),   F_z,rear = m g a/(2L) + m h a_x/(2L)
+      F_z,FL/FR = F_z,front ∓ χ_f m h a_y / B_f,   F_z,RL/RR = F_z,rear ∓ (1−χ_f) m h a_y / B_r
+
+  clipped at 0 (a wheel in the air). With χ_f the front roll-stiffness share this is the
+  plant's own transfer in steady state (its transient lags by the load-transfer time
+  constant), and the four loads sum to m g.
+* **F_y**, the single-track model in quasi-steady cornering (yaw moment balance, ṙ ≈ 0):
+  F_y,front axle = m a_y b/L, F_y,rear axle = m a_y a/L, each axle's force shared by its two
+  wheels in proportion to their estimated loads.
+* **μ**, a configured nominal for every wheel: the controller does not know the road.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class EstimatorParams:
+    """Nominal constants of the estimate (SI; names as in ``vehicle.yaml``)."""
+
+    mass_kg: float = 750.0
+    cg_to_front_axle_m: float = 1.10
+    cg_to_rear_axle_m: float = 1.25
+    cg_height_m: float = 0.54
+    track_width_front_m: float = 1.30
+    track_width_rear_m: float = 1.30
+    roll_stiffness_front_share: float = 0.55
+    gravity_mps2: float = 9.81
+    mu_nominal: float = 0.8
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> EstimatorParams:
+        """The fields found in ``values`` (e.g. vehicle.yaml), defaults for the rest."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: float(v) for k, v in values.items() if k in names})
+
+
+class TyreEstimator:
+    """F_z, F_y (N, FL FR RL RR) and μ from a_x, a_y (module docstring)."""
+
+    def __init__(self, p: EstimatorParams) -> None:
+        self.p = p
+        length = p.cg_to_front_axle_m + p.cg_to_rear_axle_m
+        w = p.mass_kg * p.gravity_mps2
+        self._fz0 = (0.5 * w * p.cg_to_rear_axle_m / length,
+                     0.5 * w * p.cg_to_front_axle_m / length)
+        self._k_long = 0.5 * p.mass_kg * p.cg_height_m / length
+        self._k_lat = (p.roll_stiffness_front_share * p.mass_kg * p.cg_height_m
+                       / p.track_width_front_m,
+                       (1.0 - p.roll_stiffness_front_share) * p.mass_kg * p.cg_height_m
+                       / p.track_width_rear_m)
+        self._fy_share = (p.cg_to_rear_axle_m / length, p.cg_to_front_axle_m / length)
+
+    def fz(self, ax: float, ay: float) -> np.ndarray:
+        """Wheel loads (4,), N."""
+        dl = self._k_long * ax
+        f, r = self._fz0[0] - dl, self._fz0[1] + dl
+        df, dr = self._k_lat[0] * ay, self._k_lat[1] * ay
+        return np.maximum(np.array([f - df, f + df, r - dr, r + dr]), 0.0)
+
+    def estimate(self, ax: float, ay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F_z (4,), F_y (4,), μ (4,))."""
+        fz = self.fz(ax, ay)
+        m_ay = self.p.mass_kg * ay
+        fy = np.empty(4)
+        for axle, (i, j) in enumerate(((0, 1), (2, 3))):
+            total = m_ay * self._fy_share[axle]
+            load = fz[i] + fz[j]
+            share_i = 0.5 if load <= 0.0 else fz[i] / load
+            fy[i], fy[j] = total * share_i, total * (1.0 - share_i)
+        return fz, fy, np.full(4, self.p.mu_nominal)
