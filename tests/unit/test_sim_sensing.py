@@ -82,3 +82,30 @@ def test_dead_time_shifts_the_steer_command_by_exactly_its_substeps():
     d.command(100, (0.1, 0.0))
     acting = [d.at(i)[0] for i in range(100, 200)]
     assert acting.index(0.1) == dt_sub
+
+
+@pytest.mark.parametrize("dead_s", [0.03, 0.04])
+def test_steering_dead_time_shifts_the_plants_step_response_by_exactly_that_time(dead_s):
+    from fourws_sim.core.scenario import load_scenario
+    from fourws_sim.core.simulator import Simulator
+
+    s = load_scenario("dlc_60_mu05")
+    ref, late = Simulator.from_scenario(s), Simulator.from_scenario(s, steer_dead_time_s=dead_s)
+    torque = np.full(4, 20.0)
+    a, b = [], []
+    for k in range(60):
+        cmd = 0.02 if k >= 5 else 0.0
+        for sim, out in ((ref, a), (late, b)):
+            sim.advance(cmd, 0.0, torque, 0.001)      # 1 ms steps: the substep
+            out.append(sim.outputs().steer_front)
+    shift = round(dead_s / 0.001)
+    assert b[:5 + shift] == [0.0] * (5 + shift)
+    np.testing.assert_allclose(b[5 + shift:], a[5:len(b) - shift], rtol=0, atol=1e-12)
+
+
+def test_dead_time_must_be_a_multiple_of_the_substep():
+    from fourws_sim.core.scenario import load_scenario
+    from fourws_sim.core.simulator import Simulator
+
+    with pytest.raises(ValueError, match="steer_dead_time_s"):
+        Simulator.from_scenario(load_scenario("dlc_60_mu05"), steer_dead_time_s=0.0305)

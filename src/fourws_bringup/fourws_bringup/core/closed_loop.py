@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from fourws_bringup.core.conditions import IDEAL, Condition, MeasuredState
 from fourws_bringup.core.configs import (
     load_allocator_config,
     load_mpc_config,
@@ -39,10 +40,14 @@ from fourws_bringup.core.metrics import run_metrics
 from fourws_common.path_lookup import SpeedProfile
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
+from fourws_sim.core.plant_io import PlantOutputs
 from fourws_sim.core.scenario import AbortLimits, load_scenario
+from fourws_sim.core.sensing import DelayLine, MeasurementNoise
 from fourws_sim.core.simulator import Simulator
+from fourws_sim.core.vehicle_params import read_vehicle_yaml
 from fourws_torque_alloc.core.allocation import TorqueAllocator
 from fourws_torque_alloc.core.pid import SpeedPid
+from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
 
 STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
                 "steer_front", "steer_rear")
@@ -95,20 +100,27 @@ def run_closed_loop(
     *,
     mpc_overrides: dict[str, Any] | None = None,
     clock: Callable[[], float] | None = None,
+    condition: Condition = IDEAL,
 ) -> ClosedLoopLog:
     """Run one scenario with one controller preset; see the module docstring.
 
-    ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests).
+    ``mpc_overrides`` replaces MPC parameters after the preset (for studies and tests);
+    ``condition`` (``core.conditions``) sets what the controllers see and how late their
+    commands act. The log's state is always the plant's truth, so every metric is computed
+    on the truth.
     """
     plant = plant_values()
     scenario = load_scenario(scenario_name_or_path)
     abort = AbortLimits.of(plant["abort_lateral_error_m"], plant["abort_sideslip_deg"])
-    mpc_cfg = load_mpc_config(controller_name, mpc_overrides)
+    mpc_cfg = load_mpc_config(controller_name, {**condition.mpc_overrides,
+                                                **(mpc_overrides or {})})
     alloc_cfg = load_allocator_config(controller_name)
     dt, substep = float(plant.get("dt_s", 0.01)), float(plant.get("substep_s", 0.001))
     if abs(dt - mpc_cfg.dt_s) > 1e-12:
         raise ValueError(f"dt_s: plant period {dt} s differs from the MPC's {mpc_cfg.dt_s} s")
-    sim = Simulator.from_scenario(scenario, substep_s=substep)
+    sim = Simulator.from_scenario(scenario, substep_s=substep,
+                                  steer_dead_time_s=condition.steer_dead_time_s)
+    bench = _Bench(condition, dt)
     mpc = MpcController(mpc_cfg)
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
@@ -124,12 +136,13 @@ def run_closed_loop(
     done, reason = scenario.check_end(out, abort)
     k = 0
     while not done and (max_steps is None or k < max_steps):
+        seen, fz, fy, mu = bench.sense(out)
         t0 = clock() if clock is not None else 0.0
-        res = mpc.step(out.t_s, VehicleSample.of(out), ref, mu=float(np.mean(out.mu)))
+        res = mpc.step(seen.t_s, VehicleSample.of(seen), ref, mu=float(np.mean(mu)))
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
-        v_ref, a_ref = speed_ref.at(out.x, out.y)
-        drive = pid.step(v_ref, out.vx, dt, a_ref)
-        a = alloc.allocate(drive.torque_nm, res.yaw_moment, out.fz, out.fy, out.mu)
+        v_ref, a_ref = speed_ref.at(seen.x, seen.y)
+        drive = pid.step(v_ref, seen.vx, dt, a_ref)
+        a = alloc.allocate(drive.torque_nm, res.yaw_moment, fz, fy, mu)
         for name in STATE_FIELDS + WHEEL_FIELDS:
             st[name].append(np.array(getattr(out, name), dtype=float))
         for name in MPC_FIELDS:
@@ -138,7 +151,8 @@ def run_closed_loop(
         force.append(drive.force_n)
         torque.append(drive.torque_nm)
         wcmd.append(np.array(a.torque_nm, dtype=float))
-        out = sim.step(res.delta_front, res.delta_rear, a.torque_nm, dt)
+        d_f, d_r, t_w = bench.act((res.delta_front, res.delta_rear, a.torque_nm))
+        out = sim.step(d_f, d_r, t_w, dt)
         k += 1
         done, reason = scenario.check_end(out, abort)
     if not done:
@@ -155,3 +169,34 @@ def run_closed_loop(
         summary=scenario.summary(),
     )
     return log
+
+
+class _Bench:
+    """The condition around the controllers: what they see (:meth:`sense`) and when their
+    commands act (:meth:`act`). The ideal condition passes the truth and the commands
+    through untouched."""
+
+    def __init__(self, condition: Condition, dt_s: float) -> None:
+        self.ideal = condition.ideal
+        self.noise = MeasurementNoise(condition.noise, dt_s, condition.seed)
+        self.delay = DelayLine(condition.delay_periods, (0.0, 0.0, np.zeros(4)))
+        self.estimator = None
+        if condition.tyre_forces == "estimated":
+            p = EstimatorParams.from_mapping({**read_vehicle_yaml(),
+                                              "mu_nominal": condition.mu_nominal})
+            self.estimator = TyreEstimator(p)
+
+    def sense(self, out: PlantOutputs) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+        """(state the controllers see, F_z, F_y, μ they use)."""
+        if self.ideal:
+            return out, out.fz, out.fy, out.mu
+        seen = MeasuredState.of(out)
+        self.noise.apply(seen)
+        if self.estimator is None:
+            return seen, out.fz, out.fy, out.mu             # the oracle, labelled as such
+        fz, fy, mu = self.estimator.estimate(seen.ax, seen.ay)
+        return seen, fz, fy, mu
+
+    def act(self, cmd: tuple[float, float, np.ndarray]) -> tuple[float, float, np.ndarray]:
+        """The command that acts now (computed ``delay_periods`` steps ago)."""
+        return cmd if self.ideal else self.delay.push(cmd)

@@ -102,15 +102,20 @@ class MeasurementNoise:
         return errs
 
 
-def noise_from_mapping(d: Mapping[str, Any] | None, dt_s: float, seed: int
-                       ) -> MeasurementNoise:
+def noise_specs(d: Mapping[str, Any] | None) -> dict[str, NoiseSpec]:
     """From a YAML mapping ``{channel: {sigma: s, tau_s: t}}`` (SI units)."""
     specs: dict[str, NoiseSpec] = {}
     for name, v in (d or {}).items():
         if not isinstance(v, Mapping) or set(v) - {"sigma", "tau_s"}:
             raise ValueError(f"noise.{name}: expected {{sigma: ..., tau_s: ...}}, got {v!r}")
         specs[str(name)] = NoiseSpec(float(v.get("sigma", 0.0)), float(v.get("tau_s", 0.0)))
-    return MeasurementNoise(specs, dt_s, seed)
+    return specs
+
+
+def noise_from_mapping(d: Mapping[str, Any] | None, dt_s: float, seed: int
+                       ) -> MeasurementNoise:
+    """:class:`MeasurementNoise` of :func:`noise_specs`."""
+    return MeasurementNoise(noise_specs(d), dt_s, seed)
 
 
 class DelayLine:

@@ -30,6 +30,7 @@ import numpy as np
 from fourws_sim.core.actuators import check_finite_commands, clip_commands
 from fourws_sim.core.plant_io import InitialState, PlantOutputs
 from fourws_sim.core.road import Road
+from fourws_sim.core.sensing import DeadTime
 from fourws_sim.core.vehicle import ALPHA, N_STATE, State, TwoTrackModel
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -46,9 +47,18 @@ class Simulator:
         road: Road,
         initial: InitialState,
         substep_s: float = 0.001,
+        steer_dead_time_s: float = 0.0,
     ) -> None:
         if not (math.isfinite(substep_s) and 1e-5 <= substep_s <= 0.01):
             raise ValueError(f"substep_s: {substep_s} is outside [1e-05, 0.01] s")
+        if not (math.isfinite(steer_dead_time_s) and 0.0 <= steer_dead_time_s <= 1.0):
+            raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} is outside [0, 1] s")
+        n_dead = round(steer_dead_time_s / substep_s)
+        if abs(n_dead * substep_s - steer_dead_time_s) > 1e-9:
+            raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} s is not a multiple of "
+                             f"substep_s = {substep_s} s")
+        #: a pure dead time of the steering commands before the actuators (None: none)
+        self._dead = DeadTime(n_dead, (0.0, 0.0)) if n_dead else None
         self.vehicle = vehicle
         self.road = road
         self.initial = initial
@@ -76,9 +86,11 @@ class Simulator:
         """Names of the command channels clipped in the last :meth:`step`."""
 
     @classmethod
-    def from_scenario(cls, scenario: Scenario, substep_s: float = 0.001) -> Simulator:
+    def from_scenario(cls, scenario: Scenario, substep_s: float = 0.001,
+                      steer_dead_time_s: float = 0.0) -> Simulator:
         """A simulator at the scenario's initial state, vehicle and road."""
-        return cls(scenario.vehicle, scenario.road, scenario.initial, substep_s)
+        return cls(scenario.vehicle, scenario.road, scenario.initial, substep_s,
+                   steer_dead_time_s)
 
     @property
     def t_s(self) -> float:
@@ -168,7 +180,15 @@ class Simulator:
         y = self._y
         uniform = self.road.uniform
         mu = self.road.mu4((), ()) if uniform else None
-        for _ in range(n):
+        dead = self._dead
+        if dead is not None:
+            dead.command(self._n_sub, (sf, sr))
+        for i in range(n):
+            if dead is not None:
+                # the command of each substep is the one issued a dead time before it
+                u, self.last_clipped = clip_commands(*dead.at(self._n_sub + i), torques,
+                                                     self._limits)
+                self._u = u
             if not uniform:
                 mu = self._mu(y)
             k1 = f(y, u, mu)
