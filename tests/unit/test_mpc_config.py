@@ -21,6 +21,7 @@ EXPECTED = {
     "improved": (True, True, "fuzzy", "apcha", "optimal"),
     "ampc_4ws": (True, False, "fuzzy", "apcha", "equal"),
     "ampc_4ws_dyc": (True, True, "fuzzy", "apcha", "rule"),
+    "lqr_ff": (False, False, "fixed", "fixed", "equal"),   # the textbook reference (law)
 }
 PRESETS = list_controllers()
 
@@ -56,7 +57,7 @@ def test_presets_load(name):
 def test_presets_share_one_cost_scaling_and_constraints():
     shared = [f.name for f in dataclasses.fields(MpcConfig)
               if f.name not in ("controller", "use_rear_steer", "use_dyc", "weights_mode",
-                                "horizons_mode")]
+                                "horizons_mode", "law")]
     cfgs = [_preset(n)[0] for n in PRESETS]
     for name in shared:
         assert len({getattr(c, name) for c in cfgs}) == 1, name

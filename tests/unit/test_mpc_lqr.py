@@ -70,3 +70,31 @@ def test_feedforward_removes_the_steady_lateral_offset_in_a_constant_turn(vx, ka
     for _ in range(3000):
         without = Ad @ without - Bd[:, 0] * (K @ without)[0] + Bkd[:, 0] * vx * kappa
     assert abs(without[0]) > 1e-3               # and feedback alone leaves an offset
+
+
+def test_lqr_ff_preset_tracks_the_ideal_paper_lane_change_within_centimetres():
+    from fourws_bringup.core.closed_loop import run_closed_loop
+
+    log = run_closed_loop("dlc_60_mu05", "lqr_ff")
+    m = log.metrics()
+    assert log.completed, log.reason
+    assert m["max_abs_lateral_error_m"] < 0.03
+    assert np.all(log.mpc["delta_rear"] == 0.0) and np.all(log.mpc["yaw_moment"] == 0.0)
+    assert log.allocation == "equal"
+
+
+def test_lqr_ff_respects_the_steering_actuator_limits():
+    from fourws_mpc.core.config import MpcConfig
+    from fourws_mpc.core.controller import VehicleSample
+    from fourws_mpc.core.laws import make_controller
+
+    cfg = MpcConfig(law="lqr_ff", controller="lqr_ff", use_rear_steer=False, use_dyc=False,
+                    weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
+    ctrl = make_controller(cfg)
+    x = np.linspace(0, 300, 3001)
+    ref = cfg.reference(x, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
+                        np.full_like(x, 15.0))
+    r = ctrl.step(0.0, VehicleSample(0.0, 1.0, 0.0, 15.0, 0.0, 0.0), ref)   # 1 m off
+    assert abs(r.delta_front) == pytest.approx(np.radians(cfg.max_dsteer_front_deg))
+    ctrl.reset()
+    assert np.array_equal(ctrl.u_prev, np.zeros(3))

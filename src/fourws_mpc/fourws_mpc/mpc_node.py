@@ -41,7 +41,8 @@ from fourws_common.topics import (
     REFERENCE_TRAJECTORY,
 )
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.controller import MEAS_FIELDS, MpcController, VehicleSample
+from fourws_mpc.core.controller import MEAS_FIELDS, VehicleSample
+from fourws_mpc.core.laws import make_controller
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
@@ -52,7 +53,7 @@ class MpcNode(Node):
     def __init__(self) -> None:
         super().__init__("mpc_node")
         self.params = ParamBinding(self, MpcConfig, on_change=self._on_params)
-        self.ctrl = MpcController(self.params.config)
+        self.ctrl = make_controller(self.params.config)
         self.ref: Reference | None = None
         self.ref_msg: ReferenceTrajectory | None = None
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
@@ -75,7 +76,11 @@ class MpcNode(Node):
 
     def _on_params(self, cfg: MpcConfig) -> None:
         old = self.ctrl.cfg
-        self.ctrl.update_config(cfg)
+        if cfg.law != old.law:
+            self.ctrl = make_controller(cfg)   # another law: a fresh controller
+            self.get_logger().warning(f"law changed to '{cfg.law}': controller rebuilt")
+        else:
+            self.ctrl.update_config(cfg)
         window = (cfg.ref_search_back, cfg.ref_search_ahead)
         if self.ref_msg is not None and window != (old.ref_search_back, old.ref_search_ahead):
             self.ref = self._reference(self.ref_msg)

@@ -38,7 +38,8 @@ from fourws_bringup.core.configs import (
 )
 from fourws_bringup.core.metrics import run_metrics
 from fourws_common.path_lookup import SpeedProfile
-from fourws_mpc.core.controller import MpcController, VehicleSample
+from fourws_mpc.core.controller import VehicleSample
+from fourws_mpc.core.laws import make_controller
 from fourws_mpc.core.reference import Reference
 from fourws_sim.core.plant_io import PlantOutputs
 from fourws_sim.core.scenario import AbortLimits, load_scenario
@@ -121,7 +122,7 @@ def run_closed_loop(
     sim = Simulator.from_scenario(scenario, substep_s=substep,
                                   steer_dead_time_s=condition.steer_dead_time_s)
     bench = _Bench(condition, dt)
-    mpc = MpcController(mpc_cfg)
+    mpc = make_controller(mpc_cfg)
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
     p = scenario.path

@@ -30,6 +30,9 @@ class MpcConfig:
     """Every parameter of the MPC (flat keys of ``fourws_mpc/config/mpc.yaml``)."""
 
     controller: str = param("improved", "controller preset name (reported in diagnostics)")
+    law: str = param("mpc", "control law: the MPC of section 3, or the textbook reference "
+                     "(front-steer LQR with curvature feed-forward, core.lqr)",
+                     choices=("mpc", "lqr_ff"))
     use_rear_steer: bool = param(True, "rear steer is an input (else δr ≡ 0)")
     use_dyc: bool = param(True, "direct yaw moment is an input (else Mz ≡ 0)")
     weights_mode: str = param("fuzzy", "fixed weights or fuzzy adaptive weights (sec. 3.2)",
@@ -133,6 +136,18 @@ class MpcConfig:
                                  unit="m/s")
     dt_s: float = param(0.01, "control period and prediction step T", lo=1e-4, hi=1.0,
                         unit="s")
+    # lqr_ff (law: lqr_ff): Bryson's rule, the largest acceptable value of each error state
+    # and of the steer angle (core.lqr.LqrWeights)
+    lqr_e1_max_m: float = param(0.05, "Bryson maximum of the lateral error", lo=1e-4,
+                                hi=10.0, unit="m")
+    lqr_e1_dot_max_mps: float = param(0.5, "Bryson maximum of its rate", lo=1e-4, hi=50.0,
+                                      unit="m/s")
+    lqr_e2_max_deg: float = param(1.0, "Bryson maximum of the heading error", lo=1e-3,
+                                  hi=90.0, unit="deg")
+    lqr_e2_dot_max_deg_s: float = param(10.0, "Bryson maximum of its rate", lo=1e-3,
+                                        hi=1000.0, unit="deg/s")
+    lqr_steer_max_deg: float = param(5.0, "Bryson maximum of the front steer angle",
+                                     lo=1e-3, hi=90.0, unit="deg")
     # solver
     qp_solver: str = param("osqp", "QP solver behind the solver seam (qp_solver.QP_SOLVERS)",
                            choices=tuple(QP_SOLVERS))
