@@ -46,7 +46,7 @@ CONTROLLERS = ("mpc_fws", "mpc_4ws", "improved")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("graph_runs")
     out = {}
-    for c in CONTROLLERS:
+    for c in (*CONTROLLERS, "lqr_ff"):
         folder = base / f"{c}@{SCENARIO}"
         metrics = run_and_score(SCENARIO, c, folder, plots=False, progress=False)
         out[c] = (folder, metrics)
@@ -65,7 +65,7 @@ def test_every_run_is_recorded_whole_and_the_4ws_presets_complete(runs):
         assert m["real_time_factor"] > 0 and m["reason"], c
         assert m["missing_steps"] == 0, (c, "the recorder lost steps")
         assert (folder / "bag" / "metadata.yaml").is_file(), c
-    for c in ("improved", "mpc_4ws"):
+    for c in ("improved", "mpc_4ws", "lqr_ff"):
         assert runs[c][1]["completed"] and runs[c][1]["steps"] > 900, (c, runs[c][1]["reason"])
         assert runs[c][1]["exit_code"] == 0 and runs[c][1]["input_rejections"] == {}, c
     # the run outcome is the plant's own: an abort is exit code 3 and not a death
@@ -118,9 +118,10 @@ def test_controllers_rank_as_tables_6_7_over_topics(runs):
     assert m["improved"]["max_abs_sideslip_deg"] < m["mpc_4ws"]["max_abs_sideslip_deg"]
 
 
-def test_graph_reproduces_the_in_process_closed_loop(runs):
-    run = read_run(runs["improved"][0])
-    log = run_closed_loop(SCENARIO, "improved")
+@pytest.mark.parametrize("controller", ["improved", "lqr_ff"])
+def test_graph_reproduces_the_in_process_closed_loop(runs, controller):
+    run = read_run(runs[controller][0])
+    log = run_closed_loop(SCENARIO, controller)
     assert run.steps == log.steps + 1
     n = log.steps
     for key in ("x", "y", "yaw", "vx", "vy", "yaw_rate"):
