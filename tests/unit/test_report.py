@@ -282,3 +282,14 @@ def test_allocation_audit_names_the_missing_topic():
     run = make_run(20)  # no drive commands recorded
     with pytest.raises(BagError, match="drive_command"):
         allocation_audit(run)
+
+
+def test_tables_6_and_7_carry_the_margins_of_their_controllers():
+    from fourws_bringup.paper import format_tables
+
+    text = format_tables({})
+    lines = [ln for ln in text.splitlines() if ln.startswith("Linearised loop")]
+    assert [ln.split(" km/h")[0] for ln in lines] == ["Linearised loop at 60",
+                                                      "Linearised loop at 90"]
+    for ln in lines:
+        assert all(f"{c} ρ " in ln for c in ("mpc_fws", "mpc_4ws", "improved"))

@@ -6,6 +6,8 @@
     fourws report BAG_OR_RUN [--out DIR]
     fourws replay BAG [--rate R] [--topics T ...] [--domain-id N]
     fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
+    fourws margins --controller NAME --scenario NAME_OR_YAML [--speed-kmh V]
+                   [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
     fourws scenarios | fourws controllers
 """
 
@@ -160,6 +162,33 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_margins(args: argparse.Namespace) -> int:
+    import json
+
+    from fourws_sim.core.scenario import load_scenario
+
+    from .core.configs import load_mpc_config
+    from .core.margins import margins
+
+    try:
+        cfg = load_mpc_config(args.controller)
+        sc = load_scenario(args.scenario)
+        vx = args.speed_kmh / 3.6 if args.speed_kmh is not None else sc.speed_mps
+        if not 1.0 <= vx <= 70.0:
+            raise ValueError(f"--speed-kmh: {vx * 3.6:g} km/h outside 3.6..252")
+        m = margins(cfg, sc.vehicle, vx, delay_periods=args.delay_periods,
+                    steer_dead_time_s=args.steer_dead_time_ms * 1e-3,
+                    relaxation=not args.no_relaxation)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"fourws margins: {exc}", file=sys.stderr)
+        return 2
+    out = {"controller": args.controller, "scenario": sc.name, "speed_kmh": vx * 3.6,
+           "delay_periods": args.delay_periods, "steer_dead_time_ms": args.steer_dead_time_ms,
+           "tyre_relaxation": not args.no_relaxation, **m.as_dict()}
+    print(json.dumps(out, indent=2))
+    return 0
+
+
 def _cmd_list(kind: str) -> int:
     from fourws_sim.core.scenario import list_scenarios
 
@@ -225,6 +254,20 @@ def build_parser() -> argparse.ArgumentParser:
                                    "as it is (default for a bare .mcap: FILE_recovered.mcap "
                                    "beside it)")
     rec.set_defaults(func=_cmd_bag)
+
+    g = sub.add_parser("margins", help="stability margins of the linearised lateral loop "
+                       "(spectral radius per period, dominant frequency, gain and phase "
+                       "margins of the steering loop) as JSON")
+    g.add_argument("--controller", required=True, help="controller preset name or YAML path")
+    g.add_argument("--scenario", required=True, help="scenario (its vehicle and speed)")
+    g.add_argument("--speed-kmh", type=float, default=None, help="speed (default: the "
+                   "scenario's)")
+    g.add_argument("--delay-periods", type=int, default=0, choices=range(0, 11),
+                   metavar="N", help="computation delay in control periods")
+    g.add_argument("--steer-dead-time-ms", type=float, default=0.0,
+                   help="steering dead time (rounded to control periods)")
+    g.add_argument("--no-relaxation", action="store_true", help="tyres without relaxation")
+    g.set_defaults(func=_cmd_margins)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
         func=lambda a: _cmd_list("scenarios"))

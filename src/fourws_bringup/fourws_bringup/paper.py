@@ -119,7 +119,28 @@ def format_tables(results: dict[tuple[str, str], dict]) -> str:
             verdict = f"same up to a tie within {TIE_REL:.0%}: {ties}"
         lines += ["", f"Ranking on max |eY| (best first): fourws {ours_text}; "
                       f"paper {' < '.join(paper_order)} ({verdict})", ""]
+        if keys is T67_KEYS:
+            lines += [margins_line(scenario, list(paper)), ""]
     return "\n".join(lines)
+
+
+def margins_line(scenario: str, controllers: list[str]) -> str:
+    """One line of ``fourws margins`` figures per controller on the scenario's vehicle and
+    speed (the linearised loop: spectral radius per period, > 1 unstable; dominant pole's
+    frequency; phase margin of the steering loop)."""
+    from fourws_sim.core.scenario import load_scenario
+
+    from .core.configs import load_mpc_config
+    from .core.margins import margins
+
+    sc = load_scenario(scenario)
+    parts = []
+    for c in controllers:
+        m = margins(load_mpc_config(c), sc.vehicle, sc.speed_mps)
+        pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
+        parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, PM {pm})")
+    return (f"Linearised loop at {sc.speed_mps * 3.6:.0f} km/h (`fourws margins`, ρ > 1 "
+            f"grows): " + "; ".join(parts))
 
 
 def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:

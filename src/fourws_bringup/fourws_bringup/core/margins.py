@@ -1,0 +1,272 @@
+"""Stability margins of the lateral loop, linearised on a straight path at one speed.
+
+**Plant** (the linear single-track model of the plant, with what the MPC's eq. (1)-(4) leave
+out), continuous states
+
+    s = [v_y, r, e2, e1, F_yf, F_yr, δ_f, δ_r, M_z, Ṁ_z]
+
+with the plant's per-axle cornering stiffness at static load C_f, C_r (``vehicle.yaml``)::
+
+    v̇_y = (F_yf + F_yr)/m − v_x r          ṙ = (a F_yf − b F_yr + M_z)/I_z
+    ė2 = r                                  ė1 = v_y + v_x e2
+    Ḟ_yf = (C_f α_f − F_yf) v_x/σ_f,  α_f = δ_f − (v_y + a r)/v_x    (tyre relaxation)
+    Ḟ_yr = (C_r α_r − F_yr) v_x/σ_r,  α_r = δ_r − (v_y − b r)/v_x
+    δ̇_f = (δ_f,cmd − δ_f)/τ_f,  δ̇_r = (δ_r,cmd − δ_r)/τ_r           (steering actuators)
+    M_z follows M_z,cmd through the motors' eq. (32)
+
+(σ the relaxation lengths at static load; without relaxation F_y = C α). Sampled with a
+zero-order hold at the control period T; a computation delay of N periods and a steering dead
+time of D periods (rounded to whole periods) are shift registers on the commands.
+
+**Controller**, its unconstrained gain at the operating point: for the MPC the first move of
+the unconstrained minimiser of eq. (16)-(19) (the condensed Hessian and gradient of ``qp``;
+disabled inputs removed; fuzzy weights at e = 0, horizons at the baseline), acting on
+ξ = [ζ; u(k−1)] with ζ the path-frame state (the controller's memory u(k−1) is a state of the
+loop); for ``lqr_ff`` δ_f = −K x. The loop's modes are the lateral, yaw, tyre, actuator,
+delay and memory modes; distance along the path and speed are not in it.
+
+Results: ``spectral_radius`` (largest |eigenvalue| of the closed loop per period: > 1 grows,
+the growth per second is ρ^(1/T)), ``frequency_hz`` of that pole, and the gain and phase
+margins of the loop broken at the front steer command (``gain_margin_db``,
+``phase_margin_deg``: the open loop L(e^{jωT}) from the commanded front steer back to the
+controller's front steer output, in negative feedback).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.fuzzy_weights import FuzzyWeights
+from fourws_mpc.core.lqr import ErrIdx, LqrLateral
+from fourws_mpc.core.lqr_controller import lqr_weights
+from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, discretise
+from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
+from fourws_sim.core.actuators import motor_state_space
+from fourws_sim.core.vehicle_params import VehicleParams
+
+#: plant state indices
+VY, R, E2, E1, FYF, FYR, DF, DR, MZ, MZD = range(10)
+N_PLANT = 10
+
+
+@dataclass(frozen=True)
+class Margins:
+    """One linearised loop's figures (module docstring)."""
+
+    spectral_radius: float
+    frequency_hz: float
+    growth_per_s: float
+    gain_margin_db: float | None
+    phase_margin_deg: float | None
+    speed_mps: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"spectral_radius": self.spectral_radius, "frequency_hz": self.frequency_hz,
+                "growth_per_s": self.growth_per_s, "gain_margin_db": self.gain_margin_db,
+                "phase_margin_deg": self.phase_margin_deg, "speed_mps": self.speed_mps}
+
+
+def plant_matrices(v: VehicleParams, vx: float, relaxation: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous (A (10,10), B (10,3)) of the plant above; inputs δ_f,cmd, δ_r,cmd, M_z,cmd."""
+    m, iz = v.mass_kg, v.yaw_inertia_kg_m2
+    a, b = v.cg_to_front_axle_m, v.cg_to_rear_axle_m
+    cf, cr = (2.0 * c for c in v.static_cornering_stiffness())
+    fz = v.static_wheel_loads_n
+    sig_f, sig_r = (float(s) for s in v.relaxation_length_m(np.array([fz[0], fz[2]])))
+    A = np.zeros((N_PLANT, N_PLANT))
+    B = np.zeros((N_PLANT, 3))
+    A[VY, FYF] = A[VY, FYR] = 1.0 / m
+    A[VY, R] = -vx
+    A[R, FYF], A[R, FYR], A[R, MZ] = a / iz, -b / iz, 1.0 / iz
+    A[E2, R] = 1.0
+    A[E1, VY], A[E1, E2] = 1.0, vx
+    for f, c, arm, d, sig in ((FYF, cf, a, DF, sig_f), (FYR, cr, -b, DR, sig_r)):
+        # α = δ − (v_y + arm r)/v_x;  F = C α (instant) or Ḟ = (C α − F) v_x/σ
+        row = np.zeros(N_PLANT)
+        row[d], row[VY], row[R] = c, -c / vx, -c * arm / vx
+        if relaxation and sig > 0.0:
+            A[f] = row * vx / sig
+            A[f, f] -= vx / sig
+        else:
+            A[f] = row          # an algebraic force: made a fast lag of 1e-4 s below
+            A[f] /= 1e-4
+            A[f, f] = -1.0 / 1e-4
+    A[DF, DF], B[DF, 0] = -1.0 / v.steer_front_time_constant_s, 1.0 / v.steer_front_time_constant_s
+    A[DR, DR], B[DR, 1] = -1.0 / v.steer_rear_time_constant_s, 1.0 / v.steer_rear_time_constant_s
+    Am, Bm, _, _ = motor_state_space(v.motor_time_constant_s)
+    A[MZ:MZD + 1, MZ:MZD + 1] = Am
+    B[MZ:MZD + 1, 2] = np.asarray(Bm).reshape(-1)
+    return A, B
+
+
+def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    n, k = B.shape
+    M = np.zeros((n + k, n + k))
+    M[:n, :n], M[:n, n:] = A, B
+    E = scipy.linalg.expm(M * dt)
+    return E[:n, :n], E[:n, n:]
+
+
+def _zeta(n_ext: int) -> np.ndarray:
+    """Map (6, n_ext) from the plant state to the MPC's path-frame ζ (vx deviation 0, X 0)."""
+    S = np.zeros((N_STATE, n_ext))
+    S[StateIdx.VY, VY] = 1.0
+    S[StateIdx.PHI, E2] = 1.0
+    S[StateIdx.R, R] = 1.0
+    S[StateIdx.Y, E1] = 1.0
+    return S
+
+
+def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
+    """K (3, 9): the MPC's unconstrained first move Δu(k) = −K [ζ; u(k−1)] at (ζ0, u = 0) on a
+    straight path, fuzzy weights at e = 0, baseline horizons."""
+    zeta0 = np.zeros(N_STATE)
+    zeta0[StateIdx.VX] = vx
+    Ak, Bk, dk = discretise(zeta0, np.zeros(N_INPUT), cfg.model_params(), cfg.dt_s)
+    Aa, Ba, _ = augment(Ak, Bk, dk)
+    n_p, n_c = cfg.np_baseline, cfg.nc_baseline
+    psi, theta, _ = prediction_matrices(Aa, Ba, output_matrix(), n_p, n_c)
+    no = output_matrix().shape[0]
+    rows = np.array([i * no + j for i in range(n_p) for j in (0, 1)])    # φ, Y of each step
+    if cfg.weights_mode == "fuzzy":
+        r = FuzzyWeights(cfg.fuzzy_spec()).ratios(0.0, 0.0)
+        w = (r[1] * cfg.q_phi_max, r[0] * cfg.q_y_max, r[2] * cfg.r_ddelta_max,
+             r[3] * cfg.r_dmz_max)
+    else:
+        w = (cfg.q_phi, cfg.q_y, cfg.r_ddelta, cfg.r_dmz)
+    q_eff, r_eff = effective_weights(cfg, *w)
+    D = np.tile(cfg.du_max, n_c)
+    cols = np.flatnonzero(np.tile(cfg.enabled, n_c))
+    th = (theta[rows] * D[None, :])[:, cols]
+    W = np.tile(q_eff, n_p)
+    H = 2.0 * th.T @ (W[:, None] * th) + 2.0 * np.diag((np.tile(r_eff, n_c) * D * D)[cols])
+    G = 2.0 * th.T @ (W[:, None] * psi[rows])                         # gradient = G ξ
+    dz = -np.linalg.solve(H, G)                                       # scaled increments
+    full = np.zeros((N_INPUT * n_c, psi.shape[1]))
+    full[cols] = dz
+    return -(full[:N_INPUT] * cfg.du_max[:, None])
+
+
+def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: int = 0,
+                steer_dead_time_s: float = 0.0, relaxation: bool = True
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(A_cl, A_open, B_f, K_f): the closed-loop matrix per period, and the loop broken at
+    the front steer command (x+ = A_open x + B_f w, the controller's front steer = K_f x)."""
+    dt = cfg.dt_s
+    Ap, Bp = _zoh(*plant_matrices(v, vx, relaxation), dt)
+    n_dead = int(round(steer_dead_time_s / dt))
+    # extended state: plant, command delay registers (3 per period), steer dead-time
+    # registers (2 per period), controller memory u(k-1) (3)
+    n_del, n_dead_s = 3 * delay_periods, 2 * n_dead
+    n = N_PLANT + n_del + n_dead_s + N_INPUT
+    i_del, i_dead, i_mem = N_PLANT, N_PLANT + n_del, N_PLANT + n_del + n_dead_s
+    # controller output u(k) = C_u x (3, n)
+    C_u = np.zeros((N_INPUT, n))
+    if cfg.law == "lqr_ff":
+        K = LqrLateral(cfg.model_params(), dt, lqr_weights(cfg)).gain(vx)
+        X = np.zeros((4, n))       # lqr error state from the plant state
+        X[ErrIdx.E1, E1] = 1.0
+        X[ErrIdx.E1_DOT, VY], X[ErrIdx.E1_DOT, E2] = 1.0, vx
+        X[ErrIdx.E2, E2] = 1.0
+        X[ErrIdx.E2_DOT, R] = 1.0
+        C_u[0] = -(K @ X)[0]
+    else:
+        K = mpc_gain(cfg, vx)                       # Δu = −K [ζ; u(k−1)]
+        Z = np.zeros((N_STATE + N_INPUT, n))
+        Z[:N_STATE] = _zeta(n)
+        Z[N_STATE:, i_mem:i_mem + N_INPUT] = np.eye(N_INPUT)
+        C_u = Z[N_STATE:] - K @ Z                  # u = u(k−1) + Δu
+        C_u[~cfg.enabled] = 0.0                     # a disabled input is pinned at 0
+    # the command that reaches the actuators: after the delay registers, then the dead time
+    A = np.zeros((n, n))
+    Bw = np.zeros((n, 1))
+    # u(k) enters the first delay register (or the actuators directly)
+    def feed(target_rows: slice | None, src: np.ndarray, src_w: np.ndarray) -> None:
+        A[target_rows] += src
+        Bw[target_rows] += src_w
+    w_f = np.zeros((N_INPUT, 1))
+    w_f[0, 0] = 1.0                                 # the broken loop injects δ_f here
+    C_cmd = C_u.copy()
+    C_cmd[0] = 0.0                                  # open loop: δ_f from the injection
+    # u applied to the plant this period
+    if delay_periods:
+        cmd = np.zeros((N_INPUT, n))
+        cmd[:, i_del + n_del - 3:i_del + n_del] = np.eye(3)
+        cmd_w = np.zeros((N_INPUT, 1))
+        # shift register: r0 <- u, r1 <- r0, ...
+        feed(slice(i_del, i_del + 3), C_cmd, w_f)
+        for j in range(1, delay_periods):
+            A[i_del + 3 * j:i_del + 3 * j + 3, i_del + 3 * (j - 1):i_del + 3 * j] = np.eye(3)
+    else:
+        cmd, cmd_w = C_cmd, w_f
+    steer, steer_w = cmd[:2], cmd_w[:2]
+    if n_dead:
+        feed(slice(i_dead, i_dead + 2), steer, steer_w)
+        for j in range(1, n_dead):
+            A[i_dead + 2 * j:i_dead + 2 * j + 2, i_dead + 2 * (j - 1):i_dead + 2 * j] = \
+                np.eye(2)
+        steer = np.zeros((2, n))
+        steer[:, i_dead + n_dead_s - 2:i_dead + n_dead_s] = np.eye(2)
+        steer_w = np.zeros((2, 1))
+    applied = np.vstack([steer, cmd[2:3]])
+    applied_w = np.vstack([steer_w, cmd_w[2:3]])
+    A[:N_PLANT, :N_PLANT] += Ap
+    A[:N_PLANT] += Bp @ applied
+    Bw[:N_PLANT] += Bp @ applied_w
+    # controller memory: u(k−1) of the next step = this step's output (closed on δ_f's
+    # injection in the open loop)
+    A[i_mem:i_mem + N_INPUT] += C_cmd
+    Bw[i_mem:i_mem + N_INPUT] += w_f
+    A_open = A
+    K_f = C_u[0:1]
+    A_cl = A_open + Bw @ K_f
+    return A_cl, A_open, Bw, K_f
+
+
+def margins(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> Margins:
+    """The figures of the module docstring."""
+    A_cl, A_o, B_f, K_f = closed_loop(cfg, v, vx, **kw)
+    eig, vec = np.linalg.eig(A_cl)
+    # An MPC with more inputs than outputs that penalises only increments has input
+    # directions with no motion (a steady yaw moment held by counter-steer front and rear,
+    # the car straight): λ = 1 exactly, the vehicle states not in the eigenvector. They do not
+    # track anything; the constraints bound them. They are left out of the radius.
+    motion = np.abs(vec[[VY, R, E2, E1]]).max(axis=0) / np.abs(vec).max(axis=0)
+    null = (np.abs(eig - 1.0) < 1e-9) & (motion < 1e-6)
+    eig = eig[~null]
+    i = int(np.argmax(np.abs(eig)))
+    rho = float(abs(eig[i]))
+    freq = abs(float(np.angle(eig[i]))) / (2.0 * math.pi * cfg.dt_s)
+    gm, pm = _loop_margins(A_o, B_f, K_f, cfg.dt_s)
+    return Margins(rho, freq, rho ** (1.0 / cfg.dt_s), gm, pm, vx)
+
+
+def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float
+                  ) -> tuple[float | None, float | None]:
+    """GM (dB) and PM (deg) of L(z) = −K (zI − A)⁻¹ B in negative feedback (the loop closes
+    with w = K x, i.e. positive feedback of K(zI−A)⁻¹B), on 0.01 rad/s .. Nyquist: the
+    smallest gain margin over the phase crossovers (L real and negative) and the smallest
+    phase margin over the gain crossovers (|L| = 1); None where there is no crossover."""
+    w = np.logspace(-2, math.log10(math.pi / dt * 0.999), 6000)
+    eye = np.eye(A.shape[0])
+    L = np.array([-(K @ np.linalg.solve(np.exp(1j * om * dt) * eye - A, B))[0, 0]
+                  for om in w])
+    gms, pms = [], []
+    for k in range(1, len(w)):
+        a, b = L[k - 1], L[k]
+        if a.imag * b.imag <= 0.0 and (a.real + b.real) < 0.0:     # crosses the negative axis
+            t = a.imag / (a.imag - b.imag) if a.imag != b.imag else 0.0
+            gms.append(-20.0 * math.log10(max(abs(a.real + t * (b.real - a.real)), 1e-300)))
+        if (abs(a) - 1.0) * (abs(b) - 1.0) <= 0.0 and abs(a) != abs(b):
+            pms.append(math.degrees(math.atan2(b.imag, b.real)) + 180.0)
+    gm = min(gms, key=abs) if gms else None
+    pm = min(((p + 180.0) % 360.0 - 180.0 for p in pms), key=abs) if pms else None
+    return gm, pm
