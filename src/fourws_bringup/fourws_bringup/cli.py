@@ -8,6 +8,7 @@
     fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
     fourws margins --controller NAME --scenario NAME_OR_YAML [--speed-kmh V]
                    [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
+    fourws sweep SPEC.yaml --out DIR [--workers N]
     fourws scenarios | fourws controllers
 """
 
@@ -189,6 +190,12 @@ def _cmd_margins(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import sweep_cli
+
+    return sweep_cli(args.spec, args.out, args.workers)
+
+
 def _cmd_list(kind: str) -> int:
     from fourws_sim.core.scenario import list_scenarios
 
@@ -268,6 +275,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="steering dead time (rounded to control periods)")
     g.add_argument("--no-relaxation", action="store_true", help="tyres without relaxation")
     g.set_defaults(func=_cmd_margins)
+
+    w = sub.add_parser("sweep", help="controllers x scenarios x conditions x seeds in the "
+                       "in-process loop: results.csv and summary.md")
+    w.add_argument("spec", help="sweep spec YAML (see fourws_bringup.sweep)")
+    w.add_argument("--out", required=True, help="output folder")
+    w.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    w.set_defaults(func=_cmd_sweep)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
         func=lambda a: _cmd_list("scenarios"))

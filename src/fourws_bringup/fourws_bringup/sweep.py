@@ -1,0 +1,205 @@
+"""``fourws sweep SPEC.yaml --out DIR [--workers N]``: controllers × scenarios × conditions ×
+seeds in the in-process loop, in parallel, one CSV row per run and a summary.
+
+Spec (YAML)::
+
+    controllers: [improved, lqr_ff]          # preset names or YAML paths
+    scenarios: [dlc_60_mu05, dlc_90_mu06]
+    seeds: [0, 1, 2, 3, 4]                   # used by conditions with noise; others run once
+    conditions:                              # name -> condition (core.conditions)
+      ideal: {}
+      noise: {noise: {y: {sigma: 0.02, tau_s: 1.0}}}
+      all: {noise: {...}, delay_periods: 1, steer_dead_time_ms: 40, tyre_forces: estimated}
+
+Each run is the same core loop as ``run_closed_loop`` (the graph reproduces it); a run that
+raises is a row with ``completed`` false and its reason, never a lost run. ``results.csv``
+has ``controller, scenario, condition, seed``, every metric key, ``completed``, ``reason``,
+the N_p/N_c ranges and the range of each weight; ``summary.md`` the median and worst over
+seeds of max |e_Y|, the aborted count, and each controller's margins (``core.margins``) under
+the condition's delay and dead time.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+import traceback
+from collections.abc import Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fourws_common.params import read_yaml_file
+
+from .core.conditions import Condition, condition_from_mapping
+
+SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
+WEIGHTS = ("q_y", "q_phi", "r_ddelta", "r_dmz")
+LEAD = ("controller", "scenario", "condition", "seed")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run of the sweep."""
+
+    controller: str
+    scenario: str
+    condition: Condition
+
+    @property
+    def key(self) -> tuple[str, str, str, int]:
+        return (self.controller, self.scenario, self.condition.name, self.condition.seed)
+
+
+def load_spec(path: str | Path) -> list[Job]:
+    """The jobs of a spec file, in a fixed order; ``ValueError`` naming a bad key."""
+    data = read_yaml_file(Path(path))
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{path}: a sweep spec is a mapping with {sorted(SPEC_KEYS)}")
+    unknown = sorted(set(data) - SPEC_KEYS)
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown} (known: {sorted(SPEC_KEYS)})")
+    for key in ("controllers", "scenarios", "conditions"):
+        if not data.get(key):
+            raise ValueError(f"{path}: '{key}' is missing or empty")
+    seeds = [int(s) for s in data.get("seeds") or [0]]
+    jobs = []
+    for name, raw in data["conditions"].items():
+        base = condition_from_mapping({**(raw or {}), "name": str(name)})
+        noisy = any(s.sigma > 0.0 for s in base.noise.values())
+        for seed in (seeds if noisy else seeds[:1]):
+            cond = condition_from_mapping({**(raw or {}), "name": str(name)}, seed=seed)
+            for c in data["controllers"]:
+                for s in data["scenarios"]:
+                    jobs.append(Job(str(c), str(s), cond))
+    return jobs
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """One row: the run's metrics, or its failure."""
+    from .core.closed_loop import run_closed_loop
+
+    row: dict[str, Any] = dict(zip(LEAD, job.key, strict=True))
+    try:
+        log = run_closed_loop(job.scenario, job.controller, condition=job.condition)
+        m = log.metrics()
+        m.pop("scenario", None)
+        m.pop("controller", None)
+        row.update(m)
+        row["steps"] = log.steps
+        for key in ("np", "nc"):
+            v = log.mpc[key]
+            row[f"{key}_min"], row[f"{key}_max"] = (int(v.min()), int(v.max())) if len(v) else \
+                (None, None)
+        for w in WEIGHTS:
+            v = log.mpc[w]
+            row[f"{w}_min"], row[f"{w}_max"] = (float(v.min()), float(v.max())) if len(v) else \
+                (None, None)
+    except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost run
+        row["completed"] = False
+        row["reason"] = f"raised {type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=3)
+    return row
+
+
+def run_sweep(jobs: list[Job], workers: int = 1, progress: bool = True
+              ) -> list[dict[str, Any]]:
+    """Every job's row, in job order; ``workers`` processes."""
+    rows: dict[int, dict[str, Any]] = {}
+    if workers <= 1:
+        for i, job in enumerate(jobs):
+            rows[i] = run_job(job)
+            _progress(progress, len(rows), len(jobs))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(run_job, job): i for i, job in enumerate(jobs)}
+            for fut in as_completed(futures):
+                rows[futures[fut]] = fut.result()
+                _progress(progress, len(rows), len(jobs))
+    return [rows[i] for i in range(len(jobs))]
+
+
+def _progress(on: bool, done: int, total: int) -> None:
+    if on:
+        bar = "#" * (30 * done // total) + "." * (30 - 30 * done // total)
+        print(f"\r[{bar}] {done}/{total} runs", end="" if done < total else "\n",
+              file=sys.stderr, flush=True)
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    """results.csv: the lead columns, then every other key in first-seen order."""
+    keys: list[str] = list(LEAD)
+    for r in rows:
+        keys += [k for k in r if k not in keys and k != "traceback"]
+    with path.open("w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: _cell(r.get(k)) for k in keys})
+
+
+def _cell(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return ""
+    if isinstance(v, dict):
+        return repr(v)
+    return v
+
+
+def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
+    """Median and worst max |e_Y| over seeds, aborted runs, margins, per cell."""
+    from fourws_sim.core.scenario import load_scenario
+
+    from .core.configs import load_mpc_config
+    from .core.margins import margins
+
+    cells: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+    conds: dict[str, Condition] = {}
+    for job, r in zip(jobs, rows, strict=True):
+        cells.setdefault((job.scenario, job.condition.name, job.controller), []).append(r)
+        conds[job.condition.name] = job.condition
+    lines = ["| scenario | condition | controller | runs | aborted | median max|eY| m | "
+             "worst max|eY| m | ρ | PM deg |", "|---|---|---|---|---|---|---|---|---|"]
+    for (sc, cond, c), rs in cells.items():
+        e = [r["max_abs_lateral_error_m"] for r in rs
+             if isinstance(r.get("max_abs_lateral_error_m"), float)]
+        aborted = sum(1 for r in rs if not r.get("completed"))
+        try:
+            cnd = conds[cond]
+            cfg = load_mpc_config(c, dict(cnd.mpc_overrides))
+            scn = load_scenario(sc)
+            mg = margins(cfg, scn.vehicle, scn.speed_mps, delay_periods=cnd.delay_periods,
+                         steer_dead_time_s=cnd.steer_dead_time_s)
+            rho, pm = f"{mg.spectral_radius:.4f}", (
+                "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f}")
+        except Exception as exc:  # noqa: BLE001 - a margin that cannot be computed is shown
+            rho, pm = f"error: {exc}", ""
+        med = f"{float(np.median(e)):.4f}" if e else "—"
+        worst = f"{max(e):.4f}" if e else "—"
+        lines.append(f"| {sc} | {cond} | {c} | {len(rs)} | {aborted} | {med} | {worst} | "
+                     f"{rho} | {pm} |")
+    return "\n".join(lines) + "\n"
+
+
+def sweep_cli(spec: str, out: str, workers: int) -> int:
+    """``fourws sweep``."""
+    try:
+        jobs = load_spec(spec)
+        out_dir = Path(out)
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        print(f"fourws sweep: {exc}", file=sys.stderr)
+        return 2
+    rows = run_sweep(jobs, workers)
+    write_csv(rows, out_dir / "results.csv")
+    (out_dir / "summary.md").write_text(
+        f"# Sweep of {Path(spec).name}: {len(rows)} runs\n\n" + summary_markdown(rows, jobs),
+        encoding="utf-8")
+    failed = sum(1 for r in rows if str(r.get("reason", "")).startswith("raised"))
+    print(f"{len(rows)} runs, {failed} raised; {out_dir / 'results.csv'}, "
+          f"{out_dir / 'summary.md'}")
+    return 0

@@ -1,0 +1,70 @@
+"""fourws sweep: the rows equal single runs, a raising run is a row with its reason, the
+parallel path gives the same rows as the serial one."""
+
+import csv
+
+import pytest
+
+from fourws_bringup.core.closed_loop import run_closed_loop
+from fourws_bringup.sweep import load_spec, run_sweep, summary_markdown, write_csv
+
+SPEC = """
+controllers: [lqr_ff, no_such_preset]
+scenarios: [dlc_60_mu05]
+seeds: [1, 2]
+conditions:
+  ideal: {}
+  noise: {noise: {y: {sigma: 0.02, tau_s: 1.0}}}
+"""
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sweep") / "spec.yaml"
+    path.write_text(SPEC, encoding="utf-8")
+    jobs = load_spec(path)
+    return jobs, run_sweep(jobs, workers=2, progress=False), path.parent
+
+
+def test_the_spec_expands_seeds_only_where_there_is_noise(swept):
+    jobs, _, _ = swept
+    keys = [j.key for j in jobs]
+    assert keys == [("lqr_ff", "dlc_60_mu05", "ideal", 1),
+                    ("no_such_preset", "dlc_60_mu05", "ideal", 1),
+                    ("lqr_ff", "dlc_60_mu05", "noise", 1),
+                    ("no_such_preset", "dlc_60_mu05", "noise", 1),
+                    ("lqr_ff", "dlc_60_mu05", "noise", 2),
+                    ("no_such_preset", "dlc_60_mu05", "noise", 2)]
+
+
+def test_rows_equal_single_runs_and_a_raising_run_is_a_row(swept):
+    jobs, rows, _ = swept
+    for job, row in zip(jobs, rows, strict=True):
+        if job.controller == "no_such_preset":
+            assert row["completed"] is False and "not found" in row["reason"]
+            continue
+        single = run_closed_loop(job.scenario, job.controller, condition=job.condition)
+        assert row["max_abs_lateral_error_m"] == single.metrics()["max_abs_lateral_error_m"]
+        assert row["steps"] == single.steps
+    assert rows[2]["max_abs_lateral_error_m"] != rows[4]["max_abs_lateral_error_m"]  # seeds
+
+
+def test_csv_and_summary(swept):
+    jobs, rows, folder = swept
+    write_csv(rows, folder / "results.csv")
+    with (folder / "results.csv").open(encoding="utf-8") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == len(jobs)
+    assert list(table[0])[:4] == ["controller", "scenario", "condition", "seed"]
+    assert {"completed", "reason", "np_min", "q_y_max"} <= set(table[0])
+    md = summary_markdown(rows, jobs)
+    assert "| dlc_60_mu05 | noise | lqr_ff | 2 | 0 |" in md
+    assert "| dlc_60_mu05 | ideal | no_such_preset | 1 | 1 |" in md
+
+
+def test_bad_spec_names_the_key(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("controllers: [improved]\nscenarios: [dlc_60_mu05]\nconditions: {a: {}}\n"
+                 "workers: 3\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="workers"):
+        load_spec(p)
