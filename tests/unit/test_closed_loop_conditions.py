@@ -76,3 +76,13 @@ def test_bad_conditions_are_refused_naming_the_key():
         condition_from_mapping({"delay_ms": 10})
     with pytest.raises(ValueError, match="noise.y"):
         condition_from_mapping({"noise": {"y": 0.02}})
+
+
+def test_vehicle_overrides_change_the_plant_not_the_controller():
+    slow = condition_from_mapping({"name": "slow", "vehicle_overrides": {
+        "steer_front_time_constant_s": 0.05, "steer_rear_time_constant_s": 0.05}})
+    assert not slow.ideal
+    a, b = _run(IDEAL), _run(slow)
+    assert not np.array_equal(a.state["steer_front"], b.state["steer_front"])
+    with pytest.raises(TypeError):
+        _run(condition_from_mapping({"vehicle_overrides": {"wings": 2}}))

@@ -68,3 +68,36 @@ def test_bad_spec_names_the_key(tmp_path):
                  "workers: 3\n", encoding="utf-8")
     with pytest.raises(ValueError, match="workers"):
         load_spec(p)
+
+
+def test_groups_and_scenario_paths_relative_to_the_spec(tmp_path):
+    (tmp_path / "sc").mkdir()
+    src = __import__("fourws_common.resources", fromlist=["config_dir"]).config_dir(
+        "fourws_sim") / "scenarios" / "dlc_60_mu05.yaml"
+    (tmp_path / "sc" / "mine.yaml").write_text(src.read_text(encoding="utf-8"),
+                                               encoding="utf-8")
+    p = tmp_path / "spec.yaml"
+    p.write_text("seeds: [0]\ngroups:\n"
+                 "  - {controllers: [lqr_ff], scenarios: [sc/mine.yaml], conditions: {a: {}}}\n"
+                 "  - {controllers: [improved], scenarios: [dlc_90_mu06], "
+                 "conditions: {b: {delay_periods: 1}}}\n", encoding="utf-8")
+    jobs = load_spec(p)
+    assert [j.key for j in jobs] == [("lqr_ff", str(tmp_path / "sc" / "mine.yaml"), "a", 0),
+                                     ("improved", "dlc_90_mu06", "b", 0)]
+    p.write_text("groups: [{controllers: [lqr_ff], scenarios: [x]}]\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"groups\[0\].*conditions"):
+        load_spec(p)
+
+
+def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
+    from pathlib import Path
+
+    spec = Path(__file__).resolve().parents[2] / "benchmarks" / "robustness.yaml"
+    jobs = load_spec(spec)
+    assert {j.controller for j in jobs} == {"mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
+                                           "ampc_4ws_dyc", "lqr_ff"}
+    noisy = {j.condition.name for j in jobs if j.condition.seed == 4}
+    assert noisy == {"noise_gm", "noise_white", "all"}          # five seeds where noise is
+    for j in jobs:
+        __import__("fourws_sim.core.scenario", fromlist=["load_scenario"]).load_scenario(
+            j.scenario)

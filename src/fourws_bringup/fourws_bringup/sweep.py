@@ -38,6 +38,7 @@ from fourws_common.params import read_yaml_file
 from .core.conditions import Condition, condition_from_mapping
 
 SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
+GROUP_KEYS = {"controllers", "scenarios", "conditions"}
 WEIGHTS = ("q_y", "q_phi", "r_ddelta", "r_dmz")
 LEAD = ("controller", "scenario", "condition", "seed")
 
@@ -56,25 +57,44 @@ class Job:
 
 
 def load_spec(path: str | Path) -> list[Job]:
-    """The jobs of a spec file, in a fixed order; ``ValueError`` naming a bad key."""
-    data = read_yaml_file(Path(path))
+    """The jobs of a spec file, in a fixed order; ``ValueError`` naming a bad key.
+
+    Instead of one product, ``groups: [{controllers, scenarios, conditions}, ...]`` gives
+    several (shared ``seeds``); a scenario given as a relative ``.yaml`` path is relative to
+    the spec's folder."""
+    path = Path(path)
+    data = read_yaml_file(path)
     if not isinstance(data, Mapping):
         raise ValueError(f"{path}: a sweep spec is a mapping with {sorted(SPEC_KEYS)}")
-    unknown = sorted(set(data) - SPEC_KEYS)
+    unknown = sorted(set(data) - SPEC_KEYS - {"groups"})
     if unknown:
-        raise ValueError(f"{path}: unknown key(s) {unknown} (known: {sorted(SPEC_KEYS)})")
-    for key in ("controllers", "scenarios", "conditions"):
-        if not data.get(key):
-            raise ValueError(f"{path}: '{key}' is missing or empty")
+        raise ValueError(f"{path}: unknown key(s) {unknown} (known: "
+                         f"{sorted(SPEC_KEYS | {'groups'})})")
     seeds = [int(s) for s in data.get("seeds") or [0]]
+    groups = data.get("groups") or [{k: data.get(k) for k in GROUP_KEYS}]
+    jobs: list[Job] = []
+    for i, g in enumerate(groups):
+        where = f"{path}: groups[{i}]" if "groups" in data else str(path)
+        if not isinstance(g, Mapping) or set(g) - GROUP_KEYS:
+            raise ValueError(f"{where}: a group has only {sorted(GROUP_KEYS)}")
+        for key in sorted(GROUP_KEYS):
+            if not g.get(key):
+                raise ValueError(f"{where}: '{key}' is missing or empty")
+        scenarios = [str(path.parent / s) if str(s).endswith((".yaml", ".yml"))
+                     and not Path(s).is_absolute() else str(s) for s in g["scenarios"]]
+        jobs += _product(g["controllers"], scenarios, g["conditions"], seeds)
+    return jobs
+
+
+def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> list[Job]:
     jobs = []
-    for name, raw in data["conditions"].items():
+    for name, raw in conditions.items():
         base = condition_from_mapping({**(raw or {}), "name": str(name)})
         noisy = any(s.sigma > 0.0 for s in base.noise.values())
         for seed in (seeds if noisy else seeds[:1]):
             cond = condition_from_mapping({**(raw or {}), "name": str(name)}, seed=seed)
-            for c in data["controllers"]:
-                for s in data["scenarios"]:
+            for c in controllers:
+                for s in scenarios:
                     jobs.append(Job(str(c), str(s), cond))
     return jobs
 

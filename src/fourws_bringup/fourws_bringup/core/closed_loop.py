@@ -22,6 +22,7 @@ of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -112,6 +113,9 @@ def run_closed_loop(
     """
     plant = plant_values()
     scenario = load_scenario(scenario_name_or_path)
+    if condition.vehicle_overrides:
+        scenario = dataclasses.replace(scenario, vehicle=dataclasses.replace(
+            scenario.vehicle, **condition.vehicle_overrides))
     abort = AbortLimits.of(plant["abort_lateral_error_m"], plant["abort_sideslip_deg"])
     mpc_cfg = load_mpc_config(controller_name, {**condition.mpc_overrides,
                                                 **(mpc_overrides or {})})

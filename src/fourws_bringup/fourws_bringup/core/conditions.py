@@ -6,9 +6,11 @@ N control periods, a steering dead time, where the allocator's and the MPC's tyr
 from (``oracle``: the plant's true per-wheel F_z, F_y and μ, the paper's idealised setting;
 ``estimated``: ``fourws_torque_alloc.core.tyre_estimate`` from the measured a_x, a_y and a
 configured nominal μ), MPC parameter overrides (model mismatch: the controller's mass,
-inertia or cornering stiffness against the plant's), and a seed. ``IDEAL`` is the paper's
-setting. In a realistic condition the controllers receive a :class:`MeasuredState`, which
-carries no tyre force and no road adhesion at all, so no plant truth can leak into them.
+inertia or cornering stiffness against the plant's), plant overrides over the scenario's
+vehicle (``vehicle_overrides``, e.g. a slower steering actuator), and a seed. ``IDEAL`` is
+the paper's setting. In a realistic condition the controllers receive a
+:class:`MeasuredState`, which carries no tyre force and no road adhesion at all, so no plant
+truth can leak into them.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class Condition:
     tyre_forces: str = "oracle"
     mu_nominal: float = 0.8
     mpc_overrides: Mapping[str, Any] = field(default_factory=dict)
+    vehicle_overrides: Mapping[str, Any] = field(default_factory=dict)
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -54,13 +57,13 @@ class Condition:
         """The paper's setting: truth in, no delay, oracle tyre data, no override."""
         return (not any(s.sigma > 0.0 for s in self.noise.values()) and not self.delay_periods
                 and not self.steer_dead_time_s and self.tyre_forces == "oracle"
-                and not self.mpc_overrides)
+                and not self.mpc_overrides and not self.vehicle_overrides)
 
 
 IDEAL = Condition()
 
 _KEYS = {"name", "noise", "delay_periods", "steer_dead_time_ms", "tyre_forces", "mu_nominal",
-         "mpc_overrides", "seed"}
+         "mpc_overrides", "vehicle_overrides", "seed"}
 
 
 def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Condition:
@@ -76,6 +79,7 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         tyre_forces=str(d.get("tyre_forces", "oracle")),
         mu_nominal=float(d.get("mu_nominal", 0.8)),
         mpc_overrides=dict(d.get("mpc_overrides") or {}),
+        vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
         seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0))
 
 
