@@ -84,5 +84,5 @@ def test_vehicle_overrides_change_the_plant_not_the_controller():
     assert not slow.ideal
     a, b = _run(IDEAL), _run(slow)
     assert not np.array_equal(a.state["steer_front"], b.state["steer_front"])
-    with pytest.raises(TypeError):
+    with pytest.raises(ValueError, match="wings"):
         _run(condition_from_mapping({"vehicle_overrides": {"wings": 2}}))

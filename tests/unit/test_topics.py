@@ -47,7 +47,8 @@ def test_qos_kinds_keep_their_values():
 
 def test_every_graph_topic_is_named_typed_and_offers_a_kind_of_the_table():
     assert DEFAULT_TOPICS == (
-        "/clock", "/vehicle/state", "/vehicle/odom", "/reference/trajectory", "/reference/path",
+        "/clock", "/vehicle/state", "/vehicle/ground_truth", "/vehicle/odom",
+        "/reference/trajectory", "/reference/path",
         "/control/mpc_command", "/control/mpc_diagnostics", "/control/drive_command",
         "/control/wheel_torques", "/run/status", "/diagnostics")
     for name, t in TOPICS.items():

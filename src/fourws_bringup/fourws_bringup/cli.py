@@ -18,16 +18,18 @@ import argparse
 import sys
 from pathlib import Path
 
+from .core.conditions import IDEAL, Condition, load_condition
 from .runner import COMPOSE_LAYOUTS
 
 
 def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
                   mode: str = "lockstep", plots: bool = True, progress: bool = True,
-                  compose: str = "none") -> dict:
+                  compose: str = "none", condition: Condition = IDEAL) -> dict:
     """``fourws run``: one run over topics, then metrics.json and plots from its bag.
 
     ``compose``: the process layout (:func:`fourws_bringup.runner.graph_specs`), recorded in
-    metrics.json; it changes the timing only, never a recorded value.
+    metrics.json; it changes the timing only, never a recorded value. ``condition``: the
+    bench (``core.conditions``), recorded in metrics.json as ``condition`` and ``seed``.
     """
     from fourws_common.exit_codes import ExitCode
     from fourws_sim.core.scenario import load_scenario
@@ -44,7 +46,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     prepare_out_dir(out_dir, force)
     print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
     outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
-                        compose=compose)
+                        compose=compose, condition=condition)
     try:
         metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
@@ -55,6 +57,8 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
             metrics["died"] = outcome.died
             metrics["died_error"] = outcome.died_error
     metrics["compose"] = compose
+    metrics["condition"] = condition.name
+    metrics["seed"] = condition.seed
     write_metrics(out_dir, metrics)
     if plots and (out_dir / "bag").exists():
         try:
@@ -92,9 +96,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .scoring import metrics_json
 
     try:
+        condition = IDEAL
+        if args.condition:
+            try:
+                condition = load_condition(args.condition, args.seed)
+            except (ValueError, OSError) as exc:
+                raise RunError(f"--condition {args.condition}: {exc}") from None
         metrics = run_and_score(args.scenario, args.controller, Path(args.out),
                                 force=args.force, mode=args.mode, plots=not args.no_plots,
-                                compose=args.compose)
+                                compose=args.compose, condition=condition)
     except RunError as exc:
         print(f"fourws run: {exc}", file=sys.stderr)
         return 2
@@ -227,6 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "as the graph); realtime: the plant steps on a 10 ms wall timer")
     r.add_argument("--no-plots", action="store_true", help="skip the figures")
     r.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
+    r.add_argument("--condition", default=None,
+                   help="the bench: a condition YAML, or SPEC.yaml#NAME for a condition of a "
+                        "sweep spec (e.g. benchmarks/robustness.yaml#all); default ideal")
+    r.add_argument("--seed", type=int, default=None, help="noise seed (default: the "
+                   "condition's, else 0)")
     r.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("paper", help="run the paper's eight configurations and print Tables 6-8")

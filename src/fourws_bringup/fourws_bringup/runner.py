@@ -25,9 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
-from fourws_common.topics import RUN_STATUS, VEHICLE_STATE
+from fourws_common.topics import RUN_STATUS, VEHICLE_GROUND_TRUTH, VEHICLE_STATE
 
-from .core.configs import controller_preset_path, params_files
+from .core.conditions import IDEAL, Condition, node_parameters
+from .core.configs import controller_preset_path, node_values, params_files
 from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
 
 RECORDER_NICE = 10  # niceness added to the recorder process
@@ -133,15 +134,16 @@ def prepare_out_dir(out_dir: Path, force: bool, *,
 
 def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
                 extra_plant: dict | None = None, compose: str = "none",
-                status_file: Path | None = None, use_sim_time: bool = False
-                ) -> list[NodeSpec]:
+                status_file: Path | None = None, use_sim_time: bool = False,
+                condition: Condition = IDEAL) -> list[NodeSpec]:
     """The node list of a run: every node with its package YAML and the controller preset.
 
     ``compose`` (:data:`COMPOSE_LAYOUTS`) picks the processes: ``none``, one per node;
     ``control``, the MPC, speed PID and allocator in one container process; ``all``, the plant
     too. Same nodes, parameters and topics in every layout (:mod:`fourws_bringup.container`);
     the recorder always has a process of its own. ``status_file``: where the plant writes
-    its final status; ``use_sim_time``: every node's clock follows /clock.
+    its final status; ``use_sim_time``: every node's clock follows /clock; ``condition``
+    (``core.conditions``): the bench, as node parameters (``node_parameters``).
     """
     if compose not in COMPOSE_LAYOUTS:
         raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
@@ -156,17 +158,20 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                     "wait_for_reference_subscribers": subscribers}
     if status_file is not None:
         plant_params["status_file"] = str(status_file)
+    bench = node_parameters(condition)
+    plant_params.update(bench["plant_node"])
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
     specs = [
         NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
                  parameters=plant_params, end_codes=RUN_END_CODES),
         NodeSpec("mpc_node", "fourws_mpc", "mpc_node", params_files=files("mpc_node"),
-                 parameters={"sync": sync}),
+                 parameters={**bench["mpc_node"], "sync": sync}),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
                  params_files=files("speed_pid_node"), parameters={"sync": sync}),
         NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
-                 params_files=files("allocator_node"), parameters={"sync": sync}),
+                 params_files=files("allocator_node"),
+                 parameters={**bench["allocator_node"], "sync": sync}),
     ]
     if use_sim_time:
         for spec in specs:
@@ -184,9 +189,19 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                               params_files=files("recorder_node"),
                               parameters={"output_dir": str(bag_dir),
                                           "start_gate_topic": VEHICLE_STATE.name,
-                                          "use_sim_time": use_sim_time},
+                                          "use_sim_time": use_sim_time,
+                                          "topics": recorded_topics(condition)},
                               nice=RECORDER_NICE))
     return specs
+
+
+def recorded_topics(condition: Condition) -> list[str]:
+    """recorder.yaml's topics; /vehicle/ground_truth only where the plant publishes it (a
+    realistic condition), so the recorder's start gate never waits for a silent topic."""
+    topics = list(node_values("recorder_node")["topics"])
+    if not node_parameters(condition)["plant_node"].get("publish_ground_truth"):
+        topics = [t for t in topics if t != VEHICLE_GROUND_TRUTH.name]
+    return topics
 
 
 @dataclass
@@ -282,14 +297,16 @@ class _Monitor:
 def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "lockstep",
               record: bool = True, progress: bool = True, timeout_s: float = 1800.0,
               extra_plant: dict | None = None, compose: str = "none",
-              use_sim_time: bool = False, stream=sys.stderr) -> RunOutcome:
+              use_sim_time: bool = False, condition: Condition = IDEAL,
+              stream=sys.stderr) -> RunOutcome:
     """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome."""
     bag_dir = out_dir / "bag" if record else None
     status_file = out_dir / "logs" / "plant_status.json"
     with contextlib.suppress(FileNotFoundError):
         status_file.unlink()
     specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose,
-                        status_file=status_file, use_sim_time=use_sim_time)
+                        status_file=status_file, use_sim_time=use_sim_time,
+                        condition=condition)
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)  # its process
     lease = DomainLease()
     sup = Supervisor(specs, lease.domain_id, out_dir / "logs")

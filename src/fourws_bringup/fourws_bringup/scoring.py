@@ -41,11 +41,12 @@ def recorded_reference(run: RunData) -> Reference | None:
 
 def tracking_metrics(run: RunData) -> dict[str, float]:
     """``core.metrics.run_metrics`` of a recorded run: the metrics.json numbers (plus
-    ``steps`` and ``sim_time_s``), from the recorded states, reference and solve times.
+    ``steps`` and ``sim_time_s``), from the recorded true states (``RunData.truth``),
+    reference and solve times.
 
     Raises :class:`BagError` when the bag holds no state or no reference.
     """
-    s = run.state
+    s = run.truth
     if not len(s["stamp_ns"]):
         raise BagError(f"{run.path}: no {VEHICLE_STATE.name} messages")
     ref = recorded_reference(run)
@@ -227,6 +228,8 @@ def missing_steps(run) -> int:
     for topic in (run.mpc_command, run.mpc_diagnostics, run.drive_command, run.wheel_torques):
         if len(topic["stamp_ns"]):
             worst = max(worst, int(np.sum(~np.isin(grid[:-1], topic["stamp_ns"]))))
+    if len(run.ground_truth["stamp_ns"]):
+        worst = max(worst, int(np.sum(~np.isin(grid, run.ground_truth["stamp_ns"]))))
     # The plant's own count (its final status): states 0..steps, so a recording that began
     # late or ended early is missing steps too, not only one with holes in between.
     steps = (run.status or {}).get("steps")

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import fcntl
+import json
 import os
 import random
 import signal
@@ -30,6 +31,8 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import yaml
 
 DOMAIN_LOCK_DIR = Path(os.environ.get("FOURWS_DOMAIN_LOCK_DIR", "/tmp"))
 DOMAIN_RANGE = range(1, 101)
@@ -166,10 +169,16 @@ def _merge_orders(orders: list[list[str]], what: str) -> list[str]:
 
 
 def _param_literal(v: object) -> str:
+    """``v`` as the YAML value of ``-p name:=value``; a string that YAML would read as
+    something else (a mapping, a number, ``true``) is double-quoted so it stays a string."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, str):
-        return v
+        try:
+            same = yaml.safe_load(v) == v
+        except yaml.YAMLError:
+            same = False
+        return v if same else json.dumps(v)
     return repr(v)
 
 

@@ -159,3 +159,13 @@ class InputConfig:
                       "only the newest state and answer it from a 1 ms steady timer, so a node "
                       "that fell behind (realtime) skips the backlog",
                       choices=("lockstep", "latest"))
+
+
+def state_mu(mu: Any) -> float | None:
+    """The road adhesion a state's per-wheel ``mu`` gives the MPC: their mean when it is
+    finite and positive, else None (no adhesion measured: the MPC takes its ``mu_default``)."""
+    values = np.asarray(mu, dtype=float)
+    if not values.size:
+        return None
+    m = float(np.mean(values))
+    return m if math.isfinite(m) and m > 0.0 else None

@@ -77,6 +77,9 @@ CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", "clock",
               "simulated time from the plant, one tick per step, for use_sim_time users")
 VEHICLE_STATE = Topic("/vehicle/state", "fourws_msgs/msg/VehicleState", "control",
                       "the plant's state of each step: starts the controllers' chain")
+VEHICLE_GROUND_TRUTH = Topic("/vehicle/ground_truth", "fourws_msgs/msg/VehicleState", "control",
+                             "the plant's true state of each step when /vehicle/state is "
+                             "sensed (a realistic condition): every metric is computed on it")
 VEHICLE_ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", "control",
                      "the same state as standard odometry, for standard tools")
 REFERENCE_TRAJECTORY = Topic("/reference/trajectory", "fourws_msgs/msg/ReferenceTrajectory",
@@ -100,7 +103,8 @@ DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "diag
 
 #: The graph's topics by name, in the order a bag records them by default.
 TOPICS: dict[str, Topic] = {t.name: t for t in (
-    CLOCK, VEHICLE_STATE, VEHICLE_ODOM, REFERENCE_TRAJECTORY, REFERENCE_PATH, MPC_COMMAND,
+    CLOCK, VEHICLE_STATE, VEHICLE_GROUND_TRUTH, VEHICLE_ODOM, REFERENCE_TRAJECTORY,
+    REFERENCE_PATH, MPC_COMMAND,
     MPC_DIAGNOSTICS, DRIVE_COMMAND, WHEEL_TORQUES, RUN_STATUS, DIAGNOSTICS)}
 DEFAULT_TOPICS: tuple[str, ...] = tuple(TOPICS)
 

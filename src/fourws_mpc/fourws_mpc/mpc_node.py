@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
 from rclpy.node import Node
 
 from fourws_common.health import NodeHealth
+from fourws_common.input_guard import state_mu
 from fourws_common.node_main import run_node
 from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
@@ -119,9 +119,7 @@ class MpcNode(Node):
     def _step(self, msg: VehicleState, stamp_ns: int, _jumped_ahead: bool) -> None:
         meas = VehicleSample.of(msg)
         t0 = time.perf_counter()
-        mu = float(np.mean(msg.mu)) if len(msg.mu) else float("nan")
-        res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref,
-                             mu=mu if np.isfinite(mu) and mu > 0.0 else None)
+        res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref, mu=state_mu(msg.mu))
         solve_ms = (time.perf_counter() - t0) * 1e3
         cmd, diag = self._cmd_msg, self._diag_msg
         cmd.header = diag.header = msg.header

@@ -6,6 +6,16 @@ state starts the control chain) and the scenario's ``/reference/trajectory`` and
 wall time) at the start, every ``status_period_s`` of wall time while running, and at the end.
 Subscribes ``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``.
 
+The bench's plant side (``fourws_sim.core.sensing.Sensors``, set by a run's condition): the
+controllers see ``/vehicle/state`` (and ``/vehicle/odom``) as a car's sensors give it —
+seeded white or Gauss-Markov noise per channel (``noise_sigma``, ``noise_tau_s``,
+``noise_seed``; one draw per new state, a republished state is the same message) and, with
+``tyre_forces: estimated``, zero in the tyre force, load and adhesion fields. Their commands
+act ``delay_periods`` steps late, the steering after ``steer_dead_time_s`` more.
+``publish_ground_truth`` adds the true state on ``/vehicle/ground_truth`` (scored instead of
+the sensed one). ``vehicle_overrides`` changes the plant's vehicle (not the controllers').
+All defaults are the paper's ideal setting.
+
 Timing modes:
 - ``lockstep`` (default): publish the state for step k, wait until the MpcCommand and the
   WheelTorques stamped k are both held, then integrate to k+1. While waiting, the state k is
@@ -73,12 +83,14 @@ from fourws_common.topics import (
     REFERENCE_PATH,
     REFERENCE_TRAJECTORY,
     RUN_STATUS,
+    VEHICLE_GROUND_TRUTH,
     VEHICLE_ODOM,
     VEHICLE_STATE,
     WHEEL_TORQUES,
 )
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
 from fourws_sim.core.scenario import AbortLimits, load_scenario
+from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, sensors_from_params
 from fourws_sim.core.simulator import Simulator
 
 
@@ -117,6 +129,25 @@ class PlantNodeConfig:
                                    "and wall time) this often", lo=0.05, hi=60.0, unit="s")
     path_pose_spacing_m: float = param(0.5, "spacing of poses in /reference/path",
                                        lo=0.05, hi=10.0, unit="m")
+    # -- the bench's plant side (core.sensing.Sensors; fourws_bringup's conditions set it)
+    noise_sigma: tuple = param([0.0] * len(CHANNELS), "measurement noise sigma per channel "
+                               f"({', '.join(CHANNELS)}; SI units)", lo=0.0, hi=100.0)
+    noise_tau_s: tuple = param([0.0] * len(CHANNELS), "Gauss-Markov correlation time per "
+                               "channel (0: white)", lo=0.0, hi=1.0e4, unit="s")
+    noise_seed: int = param(0, "seed of the measurement noise (a seed reproduces a run)",
+                            lo=0, hi=2**31 - 1)
+    delay_periods: int = param(0, "computation delay: a command answering the state of step "
+                               "k acts from step k + N", lo=0, hi=100)
+    steer_dead_time_s: float = param(0.0, "steering dead time before the actuator lag",
+                                     lo=0.0, hi=1.0, unit="s")
+    tyre_forces: str = param("oracle", "oracle: /vehicle/state carries the true tyre forces, "
+                             "loads and adhesion (the paper's idealised setting); estimated: "
+                             "those fields are 0 (no car measures them)", choices=TYRE_SOURCES)
+    vehicle_overrides: str = param("", "plant overrides over the scenario's vehicle, a YAML "
+                                   "mapping of vehicle.yaml fields (e.g. a slower steering "
+                                   "actuator); empty: none")
+    publish_ground_truth: bool = param(False, "also publish the true state on "
+                                       "/vehicle/ground_truth (realistic conditions)")
 
     def __post_init__(self) -> None:
         ratio = self.dt_s / self.substep_s
@@ -132,9 +163,15 @@ class PlantNode(Node):
         super().__init__("plant_node")
         self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
         cfg = self.params.config
-        self.scenario = load_scenario(cfg.scenario)
+        self.scenario = load_scenario(cfg.scenario).with_vehicle_overrides(
+            cfg.vehicle_overrides)
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
-        self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s)
+        self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s,
+                                           steer_dead_time_s=cfg.steer_dead_time_s)
+        self.sensors = sensors_from_params(
+            {f: getattr(cfg, f) for f in ("noise_sigma", "noise_tau_s", "noise_seed",
+                                          "delay_periods", "tyre_forces")},
+            cfg.dt_s, initial_command=((0.0, 0.0), np.zeros(4)))
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
         self.done = False
@@ -165,6 +202,12 @@ class PlantNode(Node):
         self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.name,
                                                qos_of(VEHICLE_STATE))
         self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.name, qos_of(VEHICLE_ODOM))
+        self.pub_truth = None
+        if cfg.publish_ground_truth:
+            self.pub_truth = self.create_publisher(VehicleState, VEHICLE_GROUND_TRUTH.name,
+                                                   qos_of(VEHICLE_GROUND_TRUTH))
+            self._truth_msg = VehicleState()
+            self._truth_msg.header.frame_id = "map"
         self.pub_clock = self.create_publisher(Clock, CLOCK.name, qos_of(CLOCK))
         self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
                                              qos_of(REFERENCE_TRAJECTORY))
@@ -184,6 +227,11 @@ class PlantNode(Node):
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")
         log.info(f"mode {cfg.mode}, dt {cfg.dt_s} s, substep {cfg.substep_s} s")
+        if not self.sensors.ideal or cfg.steer_dead_time_s or cfg.vehicle_overrides:
+            log.info(f"bench: noise on {sorted(self.sensors.noise.specs) or 'no channel'} "
+                     f"(seed {cfg.noise_seed}), delay {cfg.delay_periods} periods, steering "
+                     f"dead time {cfg.steer_dead_time_s * 1e3:g} ms, tyre data "
+                     f"{cfg.tyre_forces}, vehicle overrides {cfg.vehicle_overrides or 'none'}")
         # monotonic s: the first state published; the publication of the first state that was
         # answered (the run's wall time counts from here; the wait between the two is start-up:
         # nodes still discovering each other).
@@ -192,6 +240,7 @@ class PlantNode(Node):
         self._publish_reference()
         self._publish_status("running", "")
         self.outputs = self.sim.outputs()
+        self.seen = self.sensors.measure(self.outputs)  # what /vehicle/state carries
         self.started = False
         # Steady-clock timers: the plant is the /clock source, so a timer on ROS time would
         # wait for itself under use_sim_time.
@@ -286,9 +335,10 @@ class PlantNode(Node):
         cfg = self.params.config
         if self.answered_wall is None:
             self.answered_wall = self.last_publish
-        self.outputs = self.sim.step(self.steer_cmd[0], self.steer_cmd[1],
-                                     self.torque_cmd if torque is None else torque,
-                                     dt_s=cfg.dt_s)
+        steer, torques = self.sensors.act(
+            (self.steer_cmd, self.torque_cmd if torque is None else torque))
+        self.outputs = self.sim.step(steer[0], steer[1], torques, dt_s=cfg.dt_s)
+        self.seen = self.sensors.measure(self.outputs)  # one noise draw per new state
         self._warn_clipping()
         self.step_k += 1
         self.last_progress = time.monotonic()
@@ -395,7 +445,8 @@ class PlantNode(Node):
 
     def _linger(self) -> None:
         zero = Duration(seconds=0)
-        acked = all(p.wait_for_all_acked(zero) for p in (self.pub_state, self.pub_status))
+        pubs = [self.pub_state, self.pub_status] + ([self.pub_truth] if self.pub_truth else [])
+        acked = all(p.wait_for_all_acked(zero) for p in pubs)
         if not acked and time.monotonic() < self._linger_deadline:
             return
         self._exit_timer.cancel()
@@ -428,13 +479,18 @@ class PlantNode(Node):
         stamp = ns_to_stamp(self.step_k * self.dt_ns)
         msg = self._state_msg
         msg.header.stamp = stamp
-        fill_vehicle_state(msg, self.outputs)
+        fill_vehicle_state(msg, self.seen)
         # The state starts the control chain (in lockstep the next step waits on it): it
         # goes first, so the controllers compute while /clock and /vehicle/odom go out.
         self.pub_state.publish(msg)
+        if self.pub_truth is not None:
+            truth = self._truth_msg
+            truth.header.stamp = stamp
+            fill_vehicle_state(truth, self.outputs)
+            self.pub_truth.publish(truth)
         self._clock_msg.clock = stamp
         self.pub_clock.publish(self._clock_msg)
-        o = self.outputs
+        o = self.seen
         odom = self._odom_msg
         odom.pose.pose.position.x, odom.pose.pose.position.y = o.x, o.y
         odom.pose.pose.orientation.z = math.sin(0.5 * o.yaw)

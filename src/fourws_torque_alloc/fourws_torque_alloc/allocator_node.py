@@ -1,7 +1,9 @@
 """Torque allocator node: four in-wheel motor torques from the drive demand and the yaw moment.
 
-Subscribes ``/vehicle/state`` (per-wheel Fz, Fy, μ), ``/control/drive_command`` (total torque
-T) and ``/control/mpc_command`` (yaw moment Mz); publishes ``/control/wheel_torques``.
+Subscribes ``/vehicle/state`` (per-wheel Fz, Fy, μ with ``tyre_forces: oracle``; the measured
+a_x, a_y with ``tyre_forces: estimated``, ``core.tyre_estimate.TyreData``),
+``/control/drive_command`` (total torque T) and ``/control/mpc_command`` (yaw moment Mz);
+publishes ``/control/wheel_torques``.
 
 - ``sync: lockstep`` (default): publishes once per step, when it holds all three inputs with
   the same stamp, stamped with it; a stamp already answered is answered again from cache.
@@ -51,6 +53,7 @@ from fourws_msgs.msg import (
     WheelTorques,
 )
 from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
+from fourws_torque_alloc.core.tyre_estimate import TyreData
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,7 @@ class AllocatorNode(Node):
         super().__init__("allocator_node")
         self.params = ParamBinding(self, AllocatorNodeConfig, on_change=self._on_params)
         self.alloc = TorqueAllocator(self.params.config.core())
+        self.tyre_data = TyreData(self.params.config)
         self.states: dict[int, VehicleState] = {}
         self.drives: dict[int, DriveCommand] = {}
         self.mpcs: dict[int, MpcCommand] = {}
@@ -98,6 +102,7 @@ class AllocatorNode(Node):
     def _on_params(self, cfg: AllocatorNodeConfig) -> None:
         if cfg.core() != self.alloc.cfg:
             self.alloc = TorqueAllocator(cfg.core())
+            self.tyre_data = TyreData(cfg)
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         """A new reference is a new run: forget every held input and answer. A reference the
@@ -177,12 +182,12 @@ class AllocatorNode(Node):
         out.allocation = self.params.config.method
         out.unmet_torque = out.unmet_yaw_moment = 0.0
         try:
-            bad = implausible_fields(state, ("fz", "fy", "mu"))
+            used = ("fz", "fy", "mu") if self.tyre_data.estimator is None else ("ax", "ay")
+            bad = implausible_fields(state, used)
             if bad:
                 raise ValueError(f"implausible state {', '.join(bad)}")
-            res = self.alloc.allocate(drive.torque, mpc.yaw_moment,
-                                      np.asarray(state.fz), np.asarray(state.fy),
-                                      np.asarray(state.mu))
+            fz, fy, mu = self.tyre_data.of(state)
+            res = self.alloc.allocate(drive.torque, mpc.yaw_moment, fz, fy, mu)
             torque = np.asarray(res.torque_nm, dtype=float)
             if not np.all(np.isfinite(torque)):
                 raise ValueError(f"allocation gave non-finite torques {torque.tolist()}")

@@ -89,7 +89,9 @@ def _columns(stamped: list[tuple[int, int, Any]]) -> dict[str, np.ndarray]:
 
 
 #: The graph's per-step topics, each with the :class:`RunData` attribute it is read into.
-STEP_TOPICS = {topics.VEHICLE_STATE.name: "state", topics.MPC_COMMAND.name: "mpc_command",
+STEP_TOPICS = {topics.VEHICLE_STATE.name: "state",
+               topics.VEHICLE_GROUND_TRUTH.name: "ground_truth",
+               topics.MPC_COMMAND.name: "mpc_command",
                topics.MPC_DIAGNOSTICS.name: "mpc_diagnostics",
                topics.DRIVE_COMMAND.name: "drive_command",
                topics.WHEEL_TORQUES.name: "wheel_torques"}
@@ -120,6 +122,15 @@ class RunData:
     rejections: dict[str, dict[str, int]] = field(default_factory=dict)
     #: Messages per topic off the run's timeline (:func:`drop_strays`), left out above.
     strays: dict[str, int] = field(default_factory=dict)
+    #: /vehicle/ground_truth (recorded in a realistic condition only; else no rows)
+    ground_truth: dict[str, np.ndarray] = field(default_factory=lambda: _columns([]))
+
+    @property
+    def truth(self) -> dict[str, np.ndarray]:
+        """The plant's true states: /vehicle/ground_truth where the run published it (a
+        realistic condition: /vehicle/state is then what the sensors gave), else
+        /vehicle/state (the ideal condition, where the two are the same)."""
+        return self.ground_truth if len(self.ground_truth["stamp_ns"]) else self.state
 
     @property
     def steps(self) -> int:

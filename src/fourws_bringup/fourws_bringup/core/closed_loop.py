@@ -22,7 +22,6 @@ of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from fourws_bringup.core.conditions import IDEAL, Condition, MeasuredState
+from fourws_bringup.core.conditions import IDEAL, Condition, node_parameters
 from fourws_bringup.core.configs import (
     load_allocator_config,
     load_mpc_config,
@@ -38,18 +37,17 @@ from fourws_bringup.core.configs import (
     plant_values,
 )
 from fourws_bringup.core.metrics import run_metrics
+from fourws_common.input_guard import state_mu
 from fourws_common.path_lookup import SpeedProfile
 from fourws_mpc.core.controller import VehicleSample
 from fourws_mpc.core.laws import make_controller
 from fourws_mpc.core.reference import Reference
-from fourws_sim.core.plant_io import PlantOutputs
 from fourws_sim.core.scenario import AbortLimits, load_scenario
-from fourws_sim.core.sensing import DelayLine, MeasurementNoise
+from fourws_sim.core.sensing import sensors_from_params
 from fourws_sim.core.simulator import Simulator
-from fourws_sim.core.vehicle_params import read_vehicle_yaml
 from fourws_torque_alloc.core.allocation import TorqueAllocator
 from fourws_torque_alloc.core.pid import SpeedPid
-from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
+from fourws_torque_alloc.core.tyre_estimate import TyreData
 
 STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
                 "steer_front", "steer_rear")
@@ -111,21 +109,21 @@ def run_closed_loop(
     commands act. The log's state is always the plant's truth, so every metric is computed
     on the truth.
     """
-    plant = plant_values()
-    scenario = load_scenario(scenario_name_or_path)
-    if condition.vehicle_overrides:
-        scenario = dataclasses.replace(scenario, vehicle=dataclasses.replace(
-            scenario.vehicle, **condition.vehicle_overrides))
+    params = node_parameters(condition)
+    plant = {**plant_values(), **params["plant_node"]}
+    scenario = load_scenario(scenario_name_or_path).with_vehicle_overrides(
+        plant.get("vehicle_overrides", ""))
     abort = AbortLimits.of(plant["abort_lateral_error_m"], plant["abort_sideslip_deg"])
-    mpc_cfg = load_mpc_config(controller_name, {**condition.mpc_overrides,
+    mpc_cfg = load_mpc_config(controller_name, {**params["mpc_node"],
                                                 **(mpc_overrides or {})})
-    alloc_cfg = load_allocator_config(controller_name)
+    alloc_cfg = load_allocator_config(controller_name, params["allocator_node"])
     dt, substep = float(plant.get("dt_s", 0.01)), float(plant.get("substep_s", 0.001))
     if abs(dt - mpc_cfg.dt_s) > 1e-12:
         raise ValueError(f"dt_s: plant period {dt} s differs from the MPC's {mpc_cfg.dt_s} s")
     sim = Simulator.from_scenario(scenario, substep_s=substep,
-                                  steer_dead_time_s=condition.steer_dead_time_s)
-    bench = _Bench(condition, dt)
+                                  steer_dead_time_s=float(plant.get("steer_dead_time_s", 0.0)))
+    sensors = sensors_from_params(plant, dt, initial_command=(0.0, 0.0, np.zeros(4)))
+    tyre_data = TyreData(alloc_cfg)
     mpc = make_controller(mpc_cfg)
     pid = SpeedPid(load_pid_config())
     alloc = TorqueAllocator(alloc_cfg)
@@ -141,9 +139,10 @@ def run_closed_loop(
     done, reason = scenario.check_end(out, abort)
     k = 0
     while not done and (max_steps is None or k < max_steps):
-        seen, fz, fy, mu = bench.sense(out)
+        seen = sensors.measure(out)
+        fz, fy, mu = tyre_data.of(seen)
         t0 = clock() if clock is not None else 0.0
-        res = mpc.step(seen.t_s, VehicleSample.of(seen), ref, mu=float(np.mean(mu)))
+        res = mpc.step(seen.t_s, VehicleSample.of(seen), ref, mu=state_mu(seen.mu))
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
         v_ref, a_ref = speed_ref.at(seen.x, seen.y)
         drive = pid.step(v_ref, seen.vx, dt, a_ref)
@@ -156,7 +155,7 @@ def run_closed_loop(
         force.append(drive.force_n)
         torque.append(drive.torque_nm)
         wcmd.append(np.array(a.torque_nm, dtype=float))
-        d_f, d_r, t_w = bench.act((res.delta_front, res.delta_rear, a.torque_nm))
+        d_f, d_r, t_w = sensors.act((res.delta_front, res.delta_rear, a.torque_nm))
         out = sim.step(d_f, d_r, t_w, dt)
         k += 1
         done, reason = scenario.check_end(out, abort)
@@ -174,34 +173,3 @@ def run_closed_loop(
         summary=scenario.summary(),
     )
     return log
-
-
-class _Bench:
-    """The condition around the controllers: what they see (:meth:`sense`) and when their
-    commands act (:meth:`act`). The ideal condition passes the truth and the commands
-    through untouched."""
-
-    def __init__(self, condition: Condition, dt_s: float) -> None:
-        self.ideal = condition.ideal
-        self.noise = MeasurementNoise(condition.noise, dt_s, condition.seed)
-        self.delay = DelayLine(condition.delay_periods, (0.0, 0.0, np.zeros(4)))
-        self.estimator = None
-        if condition.tyre_forces == "estimated":
-            p = EstimatorParams.from_mapping({**read_vehicle_yaml(),
-                                              "mu_nominal": condition.mu_nominal})
-            self.estimator = TyreEstimator(p)
-
-    def sense(self, out: PlantOutputs) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
-        """(state the controllers see, F_z, F_y, μ they use)."""
-        if self.ideal:
-            return out, out.fz, out.fy, out.mu
-        seen = MeasuredState.of(out)
-        self.noise.apply(seen)
-        if self.estimator is None:
-            return seen, out.fz, out.fy, out.mu             # the oracle, labelled as such
-        fz, fy, mu = self.estimator.estimate(seen.ax, seen.ay)
-        return seen, fz, fy, mu
-
-    def act(self, cmd: tuple[float, float, np.ndarray]) -> tuple[float, float, np.ndarray]:
-        """The command that acts now (computed ``delay_periods`` steps ago)."""
-        return cmd if self.ideal else self.delay.push(cmd)

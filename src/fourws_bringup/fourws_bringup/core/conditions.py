@@ -8,22 +8,22 @@ from (``oracle``: the plant's true per-wheel F_z, F_y and μ, the paper's ideali
 configured nominal μ), MPC parameter overrides (model mismatch: the controller's mass,
 inertia or cornering stiffness against the plant's), plant overrides over the scenario's
 vehicle (``vehicle_overrides``, e.g. a slower steering actuator), and a seed. ``IDEAL`` is
-the paper's setting. In a realistic condition the controllers receive a
-:class:`MeasuredState`, which carries no tyre force and no road adhesion at all, so no plant
-truth can leak into them.
+the paper's setting. In a realistic condition the controllers receive the state of
+``fourws_sim.core.sensing.Sensors``: measured channels with their noise and, with estimated
+tyre data, zero in every tyre force, load and adhesion field, so no plant truth can leak into
+them. :func:`node_parameters` is the one translation of a condition into node parameters.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from fourws_sim.core.sensing import CHANNELS, NoiseSpec, noise_specs
-
-TYRE_SOURCES = ("oracle", "estimated")
+from fourws_common.params import read_yaml_file
+from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, NoiseSpec, noise_specs
 
 
 @dataclass(frozen=True)
@@ -83,25 +83,59 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0))
 
 
-@dataclass
-class MeasuredState:
-    """What a car's sensors give the controllers (no tyre forces, no road adhesion)."""
+def load_condition(arg: str, seed: int | None = None) -> Condition:
+    """The condition named by ``arg``: ``FILE.yaml`` holding one condition mapping, or
+    ``SPEC.yaml#NAME``, the condition NAME of a sweep spec (its top-level ``conditions`` or
+    any group's); ``seed`` overrides the condition's own. ``ValueError`` names what is wrong.
+    """
+    path, _, name = arg.partition("#")
+    data = read_yaml_file(path)
+    if name:
+        groups = [data] + list(data.get("groups") or []) if isinstance(data, Mapping) else []
+        found = [g["conditions"][name] for g in groups
+                 if isinstance(g, Mapping) and isinstance(g.get("conditions"), Mapping)
+                 and name in g["conditions"]]
+        if not found:
+            raise ValueError(f"{path}: no condition '{name}' among its conditions")
+        data = {**(found[0] or {}), "name": name}
+    elif not isinstance(data, Mapping):
+        raise ValueError(f"{path}: a condition file is a mapping of {sorted(_KEYS)}")
+    else:
+        data = {"name": Path(path).stem, **data}
+    return condition_from_mapping(data, seed)
 
-    t_s: float
-    x: float
-    y: float
-    yaw: float
-    vx: float
-    vy: float
-    yaw_rate: float
-    ax: float
-    ay: float
-    steer_front: float
-    steer_rear: float
-    wheel_speed: np.ndarray
 
-    @classmethod
-    def of(cls, out: Any) -> MeasuredState:
-        """The measurable fields of the plant's outputs (copied)."""
-        return cls(out.t_s, out.x, out.y, out.yaw, out.vx, out.vy, out.yaw_rate, out.ax,
-                   out.ay, out.steer_front, out.steer_rear, np.array(out.wheel_speed))
+def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
+    """The ROS parameters that put ``condition`` on the graph, per node (empty for the ideal
+    condition): the one translation, used by ``fourws run`` for the nodes and by the
+    in-process loop for its cores, so the graph reproduces the in-process run.
+
+    * ``plant_node``: the sensing and timing (``noise_sigma``/``noise_tau_s`` per channel of
+      ``sensing.CHANNELS``, ``noise_seed``, ``delay_periods``, ``steer_dead_time_s``), whether
+      the state carries the true tyre data (``tyre_forces``), plant overrides
+      (``vehicle_overrides``, a YAML mapping) and ``publish_ground_truth``;
+    * ``mpc_node``: the model-mismatch overrides, and with estimated tyre data
+      ``mu_default`` = the nominal μ (the state carries no adhesion);
+    * ``allocator_node``: ``tyre_forces`` and ``mu_nominal``.
+    """
+    if condition.ideal:
+        return {"plant_node": {}, "mpc_node": {}, "allocator_node": {}}
+    plant: dict[str, Any] = {"publish_ground_truth": True, "tyre_forces": condition.tyre_forces}
+    if any(spec.sigma > 0.0 for spec in condition.noise.values()):
+        zero = NoiseSpec()
+        plant["noise_sigma"] = [condition.noise.get(ch, zero).sigma for ch in CHANNELS]
+        plant["noise_tau_s"] = [condition.noise.get(ch, zero).tau_s for ch in CHANNELS]
+        plant["noise_seed"] = int(condition.seed)
+    if condition.delay_periods:
+        plant["delay_periods"] = int(condition.delay_periods)
+    if condition.steer_dead_time_s:
+        plant["steer_dead_time_s"] = float(condition.steer_dead_time_s)
+    if condition.vehicle_overrides:
+        plant["vehicle_overrides"] = json.dumps(dict(condition.vehicle_overrides),
+                                                sort_keys=True)
+    mpc = dict(condition.mpc_overrides)
+    alloc: dict[str, Any] = {}
+    if condition.tyre_forces == "estimated":
+        mpc.setdefault("mu_default", float(condition.mu_nominal))
+        alloc = {"tyre_forces": "estimated", "mu_nominal": float(condition.mu_nominal)}
+    return {"plant_node": plant, "mpc_node": mpc, "allocator_node": alloc}

@@ -99,11 +99,12 @@ def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) ->
     return MpcConfig.from_mapping(core_values(node_values("mpc_node", controller, overrides)))
 
 
-def load_allocator_config(controller: str | None) -> AllocatorConfig:
-    """allocator.yaml with the preset's ``allocator_node`` section merged over it (the file
-    alone for ``None``)."""
+def load_allocator_config(controller: str | None,
+                          overrides: dict[str, Any] | None = None) -> AllocatorConfig:
+    """allocator.yaml with the preset's ``allocator_node`` section (the file alone for
+    ``None``) and ``overrides`` merged over it."""
     return from_mapping(AllocatorConfig, core_values(node_values("allocator_node",
-                                                                 controller)))
+                                                                 controller, overrides)))
 
 
 def load_pid_config() -> SpeedPidConfig:

@@ -28,11 +28,14 @@ road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import yaml
 
 from fourws_common.params import read_yaml_file
 from fourws_common.path_lookup import PathIndex, nearest_sample
@@ -105,6 +108,25 @@ class Scenario:
             f"path peak lateral-acceleration demand {self.peak_lat_accel_demand_mps2:.1f} m/s² "
             f"= {self.demand_ratio:.2f} μg (μ = {mu:g})"
         )
+
+    def with_vehicle_overrides(self, overrides: Mapping[str, Any] | str) -> Scenario:
+        """This scenario with plant overrides over its vehicle (``VehicleParams`` field names:
+        a bench condition's ``vehicle_overrides``), given as a mapping or as its YAML/JSON
+        text; empty gives ``self``. ``ValueError`` names an unknown or invalid field."""
+        if isinstance(overrides, str):
+            text = overrides.strip()
+            overrides = yaml.safe_load(text) if text else {}
+        if not overrides:
+            return self
+        if not isinstance(overrides, Mapping):
+            raise ValueError(f"vehicle_overrides: expected a mapping, got {overrides!r}")
+        known = {f.name for f in dataclasses.fields(self.vehicle)}
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ValueError(f"vehicle_overrides: unknown vehicle field(s) {unknown}")
+        vehicle = dataclasses.replace(self.vehicle, **{k: type(getattr(self.vehicle, k))(v)
+                                                      for k, v in overrides.items()})
+        return dataclasses.replace(self, vehicle=vehicle)
 
     def check_end(self, out: PlantOutputs, abort: AbortLimits) -> tuple[bool, str]:
         """(done, reason). Normal ends: end_x_m reached, duration reached, end of the path;

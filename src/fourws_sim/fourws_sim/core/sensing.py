@@ -21,6 +21,7 @@ command for a dead time in substeps on top of the actuator's own lag and rate li
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from collections import deque
@@ -153,3 +154,71 @@ class DeadTime:
         while self._pending and self._pending[0][0] <= i:
             self._active = self._pending.popleft()[1]
         return self._active
+
+
+#: where the controllers' tyre data come from: the plant's truth (the paper's idealised
+#: setting) or an estimate from measured accelerations (no plant truth)
+TYRE_SOURCES = ("oracle", "estimated")
+#: the VehicleState fields no car measures: zero in a sensed state without the oracle
+UNMEASURED_WHEEL_FIELDS = ("fx", "fy", "fz", "mu")
+
+
+class Sensors:
+    """What a car's sensors give its controllers, and when their commands act: the one
+    statement of a realistic bench's plant side, used by the plant node and the in-process
+    loop alike (so the graph reproduces the in-process run for a seed).
+
+    :meth:`measure` turns the plant's outputs of a new step into the state the controllers
+    receive: the noise of :class:`MeasurementNoise` on the measured channels (one draw per
+    step: call it once per new state, never for a repeat), the sideslip β = atan2(v_y, v_x)
+    of the measured velocities, and — unless ``tyre_forces`` is ``oracle`` — zero in the
+    fields no car measures (:data:`UNMEASURED_WHEEL_FIELDS`: tyre forces, loads, adhesion).
+    :meth:`act` is the computation delay (:class:`DelayLine`) on the commands. With no noise,
+    the oracle and no delay (``ideal``) both pass their input through untouched.
+    """
+
+    def __init__(self, noise: Mapping[str, NoiseSpec] | None, dt_s: float, seed: int = 0,
+                 delay_periods: int = 0, tyre_forces: str = "oracle",
+                 initial_command: Any = None) -> None:
+        if tyre_forces not in TYRE_SOURCES:
+            raise ValueError(f"tyre_forces: '{tyre_forces}' is not one of {TYRE_SOURCES}")
+        self.noise = MeasurementNoise(dict(noise or {}), dt_s, seed)
+        self.tyre_forces = tyre_forces
+        self.delay = DelayLine(delay_periods, initial_command)
+        self.sensed = bool(self.noise._channels) or tyre_forces != "oracle"
+        self.ideal = not self.sensed and delay_periods == 0
+
+    def measure(self, out: Any) -> Any:
+        """The measured state of the plant's outputs ``out`` (a copy when sensed)."""
+        if not self.sensed:
+            return out
+        seen = dataclasses.replace(out)
+        if self.noise.apply(seen):
+            seen.sideslip = math.atan2(seen.vy, seen.vx)
+        if self.tyre_forces != "oracle":
+            for name in UNMEASURED_WHEEL_FIELDS:
+                setattr(seen, name, np.zeros_like(np.asarray(getattr(out, name), dtype=float)))
+        return seen
+
+    def act(self, cmd: Any) -> Any:
+        """The command that acts now: the one pushed ``delay_periods`` steps ago
+        (``initial_command`` until then). Pass the controllers' output every step."""
+        return cmd if self.ideal else self.delay.push(cmd)
+
+
+def sensors_from_params(values: Mapping[str, Any], dt_s: float,
+                        initial_command: Any = None) -> Sensors:
+    """:class:`Sensors` of the plant's parameters (``plant_node``'s ``noise_sigma`` and
+    ``noise_tau_s``, one value per channel of :data:`CHANNELS` in order; ``noise_seed``,
+    ``delay_periods``, ``tyre_forces``): the plant node and the in-process loop build their
+    bench from the same values."""
+    sigma = tuple(values.get("noise_sigma") or (0.0,) * len(CHANNELS))
+    tau = tuple(values.get("noise_tau_s") or (0.0,) * len(CHANNELS))
+    if len(sigma) != len(CHANNELS) or len(tau) != len(CHANNELS):
+        raise ValueError(f"noise_sigma, noise_tau_s: one value per channel {CHANNELS}, got "
+                         f"{len(sigma)} and {len(tau)}")
+    noise = {ch: NoiseSpec(float(s), float(t))
+             for ch, s, t in zip(CHANNELS, sigma, tau, strict=True) if float(s) > 0.0}
+    return Sensors(noise, dt_s, int(values.get("noise_seed", 0)),
+                   int(values.get("delay_periods", 0)),
+                   str(values.get("tyre_forces", "oracle")), initial_command)

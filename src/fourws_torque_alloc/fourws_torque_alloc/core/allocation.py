@@ -93,6 +93,8 @@ from fourws_common.wheels import Wheel
 METHODS = ("optimal", "optimal_bounded", "rule", "equal")
 PRIORITIES = ("yaw_moment", "total_torque")
 BOUNDED_SOLVERS = ("osqp", "analytic")
+#: where the per-wheel F_z, F_y and μ come from (``tyre_estimate.TyreData``)
+TYRE_SOURCES = ("oracle", "estimated")
 
 _MIN_CAPACITY_N = 1.0e-3
 _MAX_MU = 3.0
@@ -126,6 +128,21 @@ class AllocatorConfig:
                                 choices=BOUNDED_SOLVERS)
     demand_sanity_factor: float = param(10.0, "demands above this multiple of the motors' "
                                         "capacity are rejected as absurd", lo=1.0, hi=1.0e3)
+    tyre_forces: str = param("oracle", "per-wheel F_z, F_y, mu from the state message (oracle: "
+                             "the plant's truth, the paper's idealised setting) or estimated "
+                             "from the measured a_x, a_y (tyre_estimate)", choices=TYRE_SOURCES)
+    mu_nominal: float = param(0.8, "estimated: the road adhesion assumed for every wheel",
+                              lo=0.01, hi=3.0)
+    # the estimator's vehicle constants: vehicle.yaml's names and values (unit test)
+    mass_kg: float = param(750.0, "estimated: vehicle mass", lo=1.0, hi=1.0e5, unit="kg")
+    cg_to_front_axle_m: float = param(1.10, "estimated: CG to front axle a", lo=0.05, hi=10.0,
+                                      unit="m")
+    cg_to_rear_axle_m: float = param(1.25, "estimated: CG to rear axle b", lo=0.05, hi=10.0,
+                                     unit="m")
+    cg_height_m: float = param(0.54, "estimated: CG height h", lo=0.0, hi=5.0, unit="m")
+    roll_stiffness_front_share: float = param(0.55, "estimated: front share of the roll "
+                                              "stiffness (lateral load transfer split)",
+                                              lo=0.0, hi=1.0)
 
     @property
     def torque_capacity_nm(self) -> float:

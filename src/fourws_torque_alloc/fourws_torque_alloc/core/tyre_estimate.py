@@ -82,3 +82,28 @@ class TyreEstimator:
             share_i = 0.5 if load <= 0.0 else fz[i] / load
             fy[i], fy[j] = total * share_i, total * (1.0 - share_i)
         return fz, fy, np.full(4, self.p.mu_nominal)
+
+
+class TyreData:
+    """The allocator's per-wheel (F_z, F_y, μ) of a state, from its config's ``tyre_forces``:
+    ``oracle`` reads the state's own fz, fy, mu fields (the plant's truth, the paper's
+    idealised setting); ``estimated`` computes them from the state's measured a_x, a_y with
+    :class:`TyreEstimator` on the config's vehicle constants (front and rear track B)."""
+
+    def __init__(self, cfg: Any) -> None:
+        self.source = cfg.tyre_forces
+        self.estimator: TyreEstimator | None = None
+        if self.source == "estimated":
+            self.estimator = TyreEstimator(EstimatorParams(
+                mass_kg=cfg.mass_kg, cg_to_front_axle_m=cfg.cg_to_front_axle_m,
+                cg_to_rear_axle_m=cfg.cg_to_rear_axle_m, cg_height_m=cfg.cg_height_m,
+                track_width_front_m=cfg.track_width_m, track_width_rear_m=cfg.track_width_m,
+                roll_stiffness_front_share=cfg.roll_stiffness_front_share,
+                mu_nominal=cfg.mu_nominal))
+
+    def of(self, state: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F_z (4,), F_y (4,), μ (4,)) for ``state`` (attributes fz, fy, mu or ax, ay)."""
+        if self.estimator is None:
+            return (np.asarray(state.fz, dtype=float), np.asarray(state.fy, dtype=float),
+                    np.asarray(state.mu, dtype=float))
+        return self.estimator.estimate(float(state.ax), float(state.ay))
