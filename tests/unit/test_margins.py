@@ -83,3 +83,41 @@ def test_a_computation_delay_costs_margin():
     a = margins(cfg, V, 60 / 3.6)
     b = margins(cfg, V, 60 / 3.6, delay_periods=1)
     assert b.spectral_radius > a.spectral_radius and b.phase_margin_deg < a.phase_margin_deg
+
+
+ON = {"prediction_model": "single_track_actuators", "prediction_discretisation": "zoh",
+      "input_delay_periods": 1, "steer_dead_time_s": 0.04}
+
+
+@pytest.mark.parametrize("controller", ["improved", "mpc_4ws"])
+def test_compensating_the_known_delays_and_lags_restores_the_margin(controller):
+    """1 period of computation delay and 40 ms of steering dead time: the controller that
+    knows them (actuator states, prediction over the delay) is stable, the paper's is not."""
+    kw = dict(delay_periods=1, steer_dead_time_s=0.04)
+    off = margins(load_mpc_config(controller), V, 60 / 3.6, **kw)
+    on = margins(load_mpc_config(controller, ON), V, 60 / 3.6, **kw)
+    assert off.spectral_radius > 1.0 > on.spectral_radius
+
+
+def test_the_margins_gain_is_the_controllers_first_move_with_compensation():
+    """The linear loop's controller row (the gain on the extended state and the delay buffer)
+    gives the controller's own unconstrained first move for the same state and buffer."""
+    from fourws_bringup.core.margins import DF, E1, N_PLANT, closed_loop
+
+    vx = 60 / 3.6
+    cfg = load_mpc_config("mpc_4ws", {**ON, "state_bounds": False})
+    _, _, _, K_f = closed_loop(cfg, V, vx)
+    sent = np.array([[1e-3, -5e-4, 0.0], [5e-4, 0.0, 0.0], [0.0, 5e-4, 0.0],
+                     [-5e-4, 0.0, 0.0], [2e-3, 0.0, 0.0]])     # u(k−1) .. u(k−5), δr held by
+    x = np.zeros(K_f.shape[1])                                 # mpc_4ws, Mz off
+    x[E1], x[DF] = 1e-3, 3e-4
+    x[N_PLANT:N_PLANT + sent.size] = sent.reshape(-1)
+    ctrl = make_controller(cfg)
+    ctrl.sent.registers[:] = sent
+    ctrl.u_prev = sent[0].copy()
+    path = np.arange(0.0, 200.0, 0.05)
+    z = np.zeros_like(path)
+    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
+    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    assert not res.fallback
+    assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)

@@ -21,9 +21,17 @@ time of D periods (rounded to whole periods) are shift registers on the commands
 **Controller**, its unconstrained gain at the operating point: for the MPC the first move of
 the unconstrained minimiser of eq. (16)-(19) (the condensed Hessian and gradient of ``qp``;
 disabled inputs removed; fuzzy weights at e = 0, horizons at the baseline), acting on
-ξ = [ζ; u(k−1)] with ζ the path-frame state (the controller's memory u(k−1) is a state of the
-loop); for ``lqr_ff`` δ_f = −K x. The loop's modes are the lateral, yaw, tyre, actuator,
-delay and memory modes; distance along the path and speed are not in it.
+ξ = [ζ; u(k−1)] with ζ the path-frame state of the controller's prediction model
+(``prediction_model``, ``prediction_discretisation``: with ``single_track_actuators`` ζ holds
+the actual road-wheel angles, the plant's δ_f, δ_r); for ``lqr_ff`` δ_f = −K x. The
+controller's memory is a state of the loop: the last max(N_d, 1) commands it sent (u(k−1)
+and, with known delays ``input_delay_periods``, ``steer_dead_time_s``, the buffer of
+``fourws_mpc.core.delay``); with delays the gain acts on the state predicted over N_d periods
+with those commands, ζ_d = A_k^{N_d} ζ + Σ_j A_k^{N_d−1−j} B_k u_applied(k + j), exactly as
+the controller predicts. The controller's known delays (its config) and the plant's delays
+(``delay_periods``, ``steer_dead_time_s`` here) are separate, so a compensation that
+assumes the wrong delay can be analysed too. The loop's modes are the lateral, yaw, tyre,
+actuator, delay and memory modes; distance along the path and speed are not in it.
 
 Results: ``spectral_radius`` (largest |eigenvalue| of the closed loop per period: > 1 grows,
 the growth per second is ρ^(1/T)), ``frequency_hz`` of that pole, and the gain and phase
@@ -43,10 +51,12 @@ import scipy.linalg
 
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.delay import channel_delays, register_schedule
 from fourws_mpc.core.fuzzy_weights import FuzzyWeights
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
-from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, discretise
+from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
+from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
@@ -115,26 +125,39 @@ def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return E[:n, :n], E[:n, n:]
 
 
-def _zeta(n_ext: int) -> np.ndarray:
-    """Map (6, n_ext) from the plant state to the MPC's path-frame ζ (vx deviation 0, X 0)."""
-    S = np.zeros((N_STATE, n_ext))
+def _zeta(n_model: int, n_ext: int) -> np.ndarray:
+    """Map (n_model, n_ext) from the plant state to the MPC's path-frame ζ (vx deviation 0,
+    X 0; the actual steering angles for a model with actuator states)."""
+    S = np.zeros((n_model, n_ext))
     S[StateIdx.VY, VY] = 1.0
     S[StateIdx.PHI, E2] = 1.0
     S[StateIdx.R, R] = 1.0
     S[StateIdx.Y, E1] = 1.0
+    if n_model > N_STATE:
+        S[N_STATE, DF] = S[N_STATE + 1, DR] = 1.0      # ActIdx.DF_ACT, ActIdx.DR_ACT
     return S
 
 
-def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
-    """K (3, 9): the MPC's unconstrained first move Δu(k) = −K [ζ; u(k−1)] at (ζ0, u = 0) on a
-    straight path, fuzzy weights at e = 0, baseline horizons."""
+def model_matrices(cfg: MpcConfig, vx: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A_k, B_k, d_k) of the controller's prediction model at v_x on a straight path, u = 0."""
+    model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
+                                  cfg.prediction_discretisation)
     zeta0 = np.zeros(N_STATE)
     zeta0[StateIdx.VX] = vx
-    Ak, Bk, dk = discretise(zeta0, np.zeros(N_INPUT), cfg.model_params(), cfg.dt_s)
+    zeta0 = model.measured_state(zeta0, 0.0, 0.0)
+    return model.discretise(zeta0, np.zeros(N_INPUT), cfg.dt_s)
+
+
+def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
+    """K (3, n+3): the MPC's unconstrained first move Δu(k) = −K [ζ; u(k−1)] at (ζ0, u = 0) on
+    a straight path, fuzzy weights at e = 0, baseline horizons; n the prediction model's
+    state dimension (6 for eq. (1))."""
+    Ak, Bk, dk = model_matrices(cfg, vx)
     Aa, Ba, _ = augment(Ak, Bk, dk)
     n_p, n_c = cfg.np_baseline, cfg.nc_baseline
-    psi, theta, _ = prediction_matrices(Aa, Ba, output_matrix(), n_p, n_c)
-    no = output_matrix().shape[0]
+    C = output_matrix(n_state=Ak.shape[0])
+    psi, theta, _ = prediction_matrices(Aa, Ba, C, n_p, n_c)
+    no = C.shape[0]
     rows = np.array([i * no + j for i in range(n_p) for j in (0, 1)])    # φ, Y of each step
     if cfg.weights_mode == "fuzzy":
         r = FuzzyWeights(cfg.fuzzy_spec()).ratios(0.0, 0.0)
@@ -163,10 +186,14 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     dt = cfg.dt_s
     Ap, Bp = _zoh(*plant_matrices(v, vx, relaxation), dt)
     n_dead = int(round(steer_dead_time_s / dt))
+    # the controller's known delays and its buffer of commands sent (register i = u(k−1−i))
+    known = channel_delays(cfg.input_delay_periods, cfg.steer_dead_time_s, dt)
+    n_known = max(known) if cfg.law != "lqr_ff" else 0
+    n_mem = N_INPUT * max(n_known, 1)
     # extended state: plant, command delay registers (3 per period), steer dead-time
-    # registers (2 per period), controller memory u(k-1) (3)
+    # registers (2 per period), controller memory u(k-1), u(k-2), ... (3 each)
     n_del, n_dead_s = 3 * delay_periods, 2 * n_dead
-    n = N_PLANT + n_del + n_dead_s + N_INPUT
+    n = N_PLANT + n_del + n_dead_s + n_mem
     i_del, i_dead, i_mem = N_PLANT, N_PLANT + n_del, N_PLANT + n_del + n_dead_s
     # controller output u(k) = C_u x (3, n)
     C_u = np.zeros((N_INPUT, n))
@@ -180,10 +207,18 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
         C_u[0] = -(K @ X)[0]
     else:
         K = mpc_gain(cfg, vx)                       # Δu = −K [ζ; u(k−1)]
-        Z = np.zeros((N_STATE + N_INPUT, n))
-        Z[:N_STATE] = _zeta(n)
-        Z[N_STATE:, i_mem:i_mem + N_INPUT] = np.eye(N_INPUT)
-        C_u = Z[N_STATE:] - K @ Z                  # u = u(k−1) + Δu
+        n_model = K.shape[1] - N_INPUT
+        Z = np.zeros((n_model + N_INPUT, n))
+        Z[:n_model] = _zeta(n_model, n)
+        if n_known:                                 # ζ predicted over the known delay
+            Ak, Bk, _ = model_matrices(cfg, vx)
+            ch = np.arange(N_INPUT)
+            for regs in register_schedule(known):   # as delay.predict_over_delay
+                U = np.zeros((N_INPUT, n))
+                U[ch, i_mem + N_INPUT * regs + ch] = 1.0
+                Z[:n_model] = Ak @ Z[:n_model] + Bk @ U
+        Z[n_model:, i_mem:i_mem + N_INPUT] = np.eye(N_INPUT)
+        C_u = Z[n_model:] - K @ Z                  # u = u(k−1) + Δu
         C_u[~cfg.enabled] = 0.0                     # a disabled input is pinned at 0
     # the command that reaches the actuators: after the delay registers, then the dead time
     A = np.zeros((n, n))
@@ -222,9 +257,11 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     A[:N_PLANT] += Bp @ applied
     Bw[:N_PLANT] += Bp @ applied_w
     # controller memory: u(k−1) of the next step = this step's output (closed on δ_f's
-    # injection in the open loop)
+    # injection in the open loop); older commands shift down the buffer
     A[i_mem:i_mem + N_INPUT] += C_cmd
     Bw[i_mem:i_mem + N_INPUT] += w_f
+    for j in range(N_INPUT, n_mem, N_INPUT):
+        A[i_mem + j:i_mem + j + N_INPUT, i_mem + j - N_INPUT:i_mem + j] = np.eye(N_INPUT)
     A_open = A
     K_f = C_u[0:1]
     A_cl = A_open + Bw @ K_f
@@ -240,7 +277,7 @@ def margins(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> Margins:
     # the car straight): λ = 1 exactly, the vehicle states not in the eigenvector. They do not
     # track anything; the constraints bound them. They are left out of the radius.
     motion = np.abs(vec[[VY, R, E2, E1]]).max(axis=0) / np.abs(vec).max(axis=0)
-    null = (np.abs(eig - 1.0) < 1e-9) & (motion < 1e-6)
+    null = (np.abs(eig - 1.0) < 1e-6) & (motion < 1e-6)   # 1e-6: expm round-off
     eig = eig[~null]
     i = int(np.argmax(np.abs(eig)))
     rho = float(abs(eig[i]))

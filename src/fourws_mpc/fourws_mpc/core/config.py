@@ -20,7 +20,7 @@ from fourws_common.params import from_mapping, param
 from fourws_mpc.core.apcha import ApchaParams
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
-from fourws_mpc.core.prediction_model import PREDICTION_MODELS
+from fourws_mpc.core.prediction_model import DISCRETISATIONS, PREDICTION_MODELS
 from fourws_mpc.core.qp_solver import QP_SOLVERS
 from fourws_mpc.core.reference import SEARCH_AHEAD, SEARCH_BACK, Reference
 
@@ -136,6 +136,22 @@ class MpcConfig:
                                  unit="m/s")
     dt_s: float = param(0.01, "control period and prediction step T", lo=1e-4, hi=1.0,
                         unit="s")
+    # beyond assumption (6) (docs/mpc.md, "Actuator-aware prediction", "Delay compensation")
+    prediction_discretisation: str = param(
+        "euler", "discretisation of the linearised model: forward Euler (eq. 4) or the exact "
+        "zero-order hold", choices=DISCRETISATIONS)
+    steer_front_time_constant_s: float = param(
+        0.02, "front steering lag τ_f of the single_track_actuators model", lo=1e-4, hi=10.0,
+        unit="s")
+    steer_rear_time_constant_s: float = param(
+        0.02, "rear steering lag τ_r of the single_track_actuators model", lo=1e-4, hi=10.0,
+        unit="s")
+    input_delay_periods: int = param(0, "known computation delay compensated by prediction "
+                                     "(a command computed at k acts from k + N)", lo=0,
+                                     hi=100, unit="periods")
+    steer_dead_time_s: float = param(0.0, "known steering dead time compensated by "
+                                     "prediction (rounded to periods)", lo=0.0, hi=1.0,
+                                     unit="s")
     # lqr_ff (law: lqr_ff): Bryson's rule, the largest acceptable value of each error state
     # and of the steer angle (core.lqr.LqrWeights)
     lqr_e1_max_m: float = param(0.05, "Bryson maximum of the lateral error", lo=1e-4,
@@ -205,7 +221,9 @@ class MpcConfig:
             c_cr=self.cornering_stiffness_rear_static_n_per_rad,
             c_lf=self.longitudinal_stiffness_front_n, c_lr=self.longitudinal_stiffness_rear_n,
             slip_front=self.slip_ratio_front, slip_rear=self.slip_ratio_rear,
-            min_speed_mps=self.min_speed_mps)
+            min_speed_mps=self.min_speed_mps,
+            steer_front_time_constant_s=self.steer_front_time_constant_s,
+            steer_rear_time_constant_s=self.steer_rear_time_constant_s)
 
     @property
     def du_max(self) -> np.ndarray:

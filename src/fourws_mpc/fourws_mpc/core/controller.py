@@ -12,17 +12,21 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
 4. **horizons**: fixed (N_p, N_c baseline) or APCHA (eq. 7-15, ``apcha``) from e_s, the
    previous e_s, the last applied increment and the previous horizons;
 5. **prediction**: state ζ0 = [vy, vx, φ, r, Y, X] in the path frame at the nearest point
-   (``prediction_frame = "path"``; "global" uses the map frame as printed in the paper), the
-   reference outputs (φ_ref, Y_ref) at s + vx T i, i = 1..N_p, and the injected prediction
-   model (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4);
+   (``prediction_frame = "path"``; "global" uses the map frame as printed in the paper),
+   extended by the model's own states (the measured road-wheel angles for
+   ``single_track_actuators``), the reference outputs (φ_ref, Y_ref) at s + vx T i,
+   i = 1..N_p, and the injected prediction model (``prediction_model``) discretised at
+   (ζ0, u(k−1)), eq. (4). With known delays (``input_delay_periods``, ``steer_dead_time_s``)
+   ζ0 is predicted over the delay N_d with the commands already sent and the reference
+   starts N_d periods later (``delay``);
 6. **solve**: the QP of eq. (16)-(20) (``qp``) with the injected solver (``qp_solver``),
    warm-started from the previous plan shifted by one; hard bounds |vy| ≤ vx tan β_max and
    |r| ≤ factor μ g / vx on predicted steps i ≥ ``state_bounds_from_step``, each relaxed to
    the current |vy| or |r| when the car is already beyond it ("no worse than now": a bound
    the state already violates cannot be met within a few steps and would only make the QP
    infeasible); the paper's weights through the cost scaling (``cost_scaling``);
-7. **result**: u(k) = u(k−1) + Δu*(k), eq. (22), or the fallback; the step's history is
-   committed only here.
+7. **result**: u(k) = u(k−1) + Δu*(k), eq. (22), or the fallback; the step's history (with
+   the buffer of commands sent) is committed only here.
 
 Fallback: when the solver does not return a trusted solution (``qp_solver.trusted``; or the
 QP is infeasible because of the hard bounds), the previous optimal plan is applied shifted by
@@ -45,6 +49,12 @@ from fourws_common.input_guard import implausible_fields
 from fourws_mpc.core.apcha import apcha, integrated_error
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.delay import (
+    CommandBuffer,
+    channel_delays,
+    predict_over_delay,
+    register_schedule,
+)
 from fourws_mpc.core.fuzzy_weights import FuzzyWeights
 from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_model
@@ -59,7 +69,8 @@ G = 9.81
 class VehicleSample:
     """The measured state the MPC takes (SI, map frame / ISO body frame): its one state type.
     :meth:`of` builds it from anything with these attributes (a VehicleState message, the
-    plant's outputs)."""
+    plant's outputs). ``steer_front``, ``steer_rear`` are the actual road-wheel angles (rad),
+    read only by a prediction model with actuator states."""
 
     x: float
     y: float
@@ -67,12 +78,15 @@ class VehicleSample:
     vx: float
     vy: float
     yaw_rate: float
+    steer_front: float = 0.0
+    steer_rear: float = 0.0
 
     @classmethod
     def of(cls, obj: Any) -> VehicleSample:
-        """The sample of an object with attributes x, y, yaw, vx, vy, yaw_rate."""
+        """The sample of an object with attributes x, y, yaw, vx, vy, yaw_rate, steer_front,
+        steer_rear."""
         return cls(float(obj.x), float(obj.y), float(obj.yaw), float(obj.vx), float(obj.vy),
-                   float(obj.yaw_rate))
+                   float(obj.yaw_rate), float(obj.steer_front), float(obj.steer_rear))
 
 
 #: the fields of :class:`VehicleSample`, in order (what a node reads from its state message)
@@ -180,7 +194,11 @@ class MpcController:
     def _apply(self, c: MpcConfig, old: MpcConfig | None) -> None:
         """Derive everything that depends on the config; rebuild only what changed."""
         self.model = (self._injected_model if self._injected_model is not None else
-                      make_prediction_model(c.prediction_model, c.model_params()))
+                      make_prediction_model(c.prediction_model, c.model_params(),
+                                            c.prediction_discretisation))
+        self._delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
+        self._n_delay = max(self._delays)
+        self._schedule = register_schedule(self._delays)
         self.apcha_params = c.apcha_params()
         if c.weights_mode != "fuzzy":
             self.fuzzy = None
@@ -217,6 +235,8 @@ class MpcController:
             self.n_c = min(max(self.n_c, cfg.nc_min), cfg.nc_max, self.n_p)
         else:
             self.n_p, self.n_c = cfg.np_baseline, cfg.nc_baseline
+        self.sent = self.sent.resized(self._n_delay)
+        self.sent.registers[0] = self.u_prev
 
     def adopt_reference(self, ref: Reference) -> None:
         """Use ``ref`` (the same path, e.g. with another search window) from the next step on
@@ -233,6 +253,7 @@ class MpcController:
             self._stepped = False
         u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).copy()
         self.u_prev = np.where(self._enabled, np.clip(u, -self._u_max, self._u_max), 0.0)
+        self.sent = CommandBuffer(self._n_delay, self.u_prev)
         self.du_last = np.zeros(N_INPUT)
         self.plan_u: np.ndarray | None = None
         self.plan_du_scaled: np.ndarray | None = None
@@ -304,7 +325,9 @@ class MpcController:
 
     def _prediction(self, s: VehicleSample, ref: Reference, err: _Errors, hz: _Horizons
                     ) -> _Prediction:
-        """Stage 5: ζ0 in the prediction frame, the reference outputs, eq. (4) at ζ0."""
+        """Stage 5: ζ0 in the prediction frame (with the model's appended states), eq. (4) at
+        ζ0; with known delays ζ0 predicted over them (``delay``); the reference outputs from
+        the delayed point on."""
         c = self.cfg
         zeta = np.zeros(N_STATE)
         zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = s.vy, s.vx, s.yaw_rate
@@ -313,9 +336,14 @@ class MpcController:
         else:
             X, Y, phi = s.x, s.y, s.yaw
         zeta[StateIdx.PHI], zeta[StateIdx.Y], zeta[StateIdx.X] = phi, Y, X
-        phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, hz.n_p, s.yaw, c.prediction_frame)
+        zeta = self.model.measured_state(zeta, s.steer_front, s.steer_rear)
+        n_d = self._n_delay
+        phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, hz.n_p + n_d, s.yaw,
+                                     c.prediction_frame)
         Ak, Bk, dk = self.model.discretise(zeta, self.u_prev, c.dt_s)
-        return _Prediction(zeta, np.column_stack([phi_ref, y_ref]), Ak, Bk, dk)
+        if n_d:
+            zeta = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
+        return _Prediction(zeta, np.column_stack([phi_ref[n_d:], y_ref[n_d:]]), Ak, Bk, dk)
 
     def _solve(self, s: VehicleSample, mu: float | None, pred: _Prediction, hz: _Horizons,
                w: _Weights) -> QpSolution:
@@ -350,6 +378,7 @@ class MpcController:
         # the step's history is committed only here: a step that raised changed nothing
         self.du_last = u - self.u_prev
         self.u_prev = u
+        self.sent.push(u)
         self.n_p, self.n_c = hz.n_p, hz.n_c
         self.e_s_prev = hz.e_s
         self._ref, self.ref_hint = ref, err.near.index

@@ -70,7 +70,8 @@ class InputIdx(IntEnum):
 
 @dataclass(frozen=True, slots=True)
 class ModelParams:
-    """Parameters of eq. (1) in SI units; C_cf, C_cr, C_lf, C_lr are per tyre."""
+    """Parameters of eq. (1) in SI units; C_cf, C_cr, C_lf, C_lr are per tyre; the steering
+    time constants belong to the actuator-aware model (``actuator_model``)."""
 
     mass_kg: float = 750.0
     yaw_inertia_kg_m2: float = 750.0
@@ -83,6 +84,10 @@ class ModelParams:
     slip_front: float = 0.0
     slip_rear: float = 0.0
     min_speed_mps: float = 1.0
+    #: first-order steering lags τ_f, τ_r (s), used by the actuator-aware prediction model
+    #: only (``actuator_model``); eq. (1) takes the commanded angles
+    steer_front_time_constant_s: float = 0.02
+    steer_rear_time_constant_s: float = 0.02
 
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The model seam: what the MPC needs of its prediction model, and the paper's model behind it.
+"""The model seam: what the MPC needs of its prediction model, and the models behind it.
 
 A prediction model turns an operating point into the affine discrete model of eq. (4)::
 
@@ -6,7 +6,20 @@ A prediction model turns an operating point into the affine discrete model of eq
 
 (:meth:`PredictionModel.discretise`); the QP condenses it over the horizon (``qp``). Models
 are chosen by name (:data:`PREDICTION_MODELS`, parameter ``prediction_model``) or injected
-into :class:`~fourws_mpc.core.controller.MpcController` directly.
+into :class:`~fourws_mpc.core.controller.MpcController` directly. A model's state may extend
+ζ of eq. (1) by states appended after ``StateIdx.X`` (``n_state``; :meth:`measured_state`
+builds it from the measured ζ and the measured road-wheel angles).
+
+Discretisation of the linearisation ζ̇ ≈ A_t ζ + B_t u + c, c = f(ζ0, u0) − A_t ζ0 − B_t u0
+(parameter ``prediction_discretisation``):
+
+* ``euler`` (the paper's eq. (4)): A_k = I + T A_t, B_k = T B_t, d_k = T c;
+* ``zoh`` (exact for the linearised model with the input held over the period)::
+
+      expm(T [[A_t, B_t, c], [0, 0, 0]]) = [[A_k, B_k, d_k], [0, I, 0]]
+
+  With a 20 ms steering lag and T = 10 ms forward Euler maps the lag's pole e^{−T/τ} = 0.61
+  to 1 − T/τ = 0.5; the zero-order hold is exact (docs/mpc.md, "Actuator-aware prediction").
 """
 
 from __future__ import annotations
@@ -15,40 +28,112 @@ from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
+import scipy.linalg
 
 from fourws_common.params import choose
-from fourws_mpc.core.model import ModelParams, discretise
+from fourws_mpc.core import actuator_model
+from fourws_mpc.core.model import N_STATE, ModelParams, discretise, jacobians
+
+DISCRETISATIONS = ("euler", "zoh")
 
 
 class PredictionModel(Protocol):
     """Discretise the model at a state and input."""
 
+    n_state: int
+
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of eq. (4) at (ζ, u) for the period ``dt_s``."""
 
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
+                       ) -> np.ndarray:
+        """The model's state from ζ of eq. (1) (6,) and the actual road-wheel angles."""
+
+
+def affine_euler(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
+                 u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward Euler of the linearisation, eq. (4)."""
+    return (np.eye(At.shape[0]) + dt_s * At, dt_s * Bt,
+            dt_s * (f0 - At @ zeta0 - Bt @ u0))
+
+
+def affine_zoh(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
+               u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact zero-order-hold discretisation of the linearisation (module docstring)."""
+    n, m = Bt.shape
+    M = np.zeros((n + m + 1, n + m + 1))
+    M[:n, :n] = At
+    M[:n, n:n + m] = Bt
+    M[:n, n + m] = f0 - At @ zeta0 - Bt @ u0
+    E = scipy.linalg.expm(dt_s * M)
+    return E[:n, :n], E[:n, n:n + m], E[:n, n + m].copy()
+
+
+def _discretiser(name: str) -> Callable:
+    if name not in DISCRETISATIONS:
+        raise ValueError(f"prediction_discretisation: '{name}' is not one of "
+                         f"{list(DISCRETISATIONS)}")
+    return affine_euler if name == "euler" else affine_zoh
+
 
 class SingleTrackModel:
     """The paper's 3-DOF single-track model, eq. (1)-(4), linearised exactly at (ζ0, u0)
-    (``model.discretise``)."""
+    (``model.discretise``; with ``zoh``, the hold-equivalent of the same linearisation)."""
 
     name = "single_track"
+    n_state = N_STATE
 
-    def __init__(self, params: ModelParams) -> None:
+    def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
         self.params = params
+        self.discretisation = discretisation
+        self._disc = _discretiser(discretisation)
 
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of eq. (4)."""
-        return discretise(zeta, u, self.params, dt_s)
+        if self.discretisation == "euler":
+            return discretise(zeta, u, self.params, dt_s)
+        return self._disc(*jacobians(zeta, u, self.params), zeta, u, dt_s)
+
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
+                       ) -> np.ndarray:
+        """ζ itself: eq. (1) takes the commanded angles."""
+        return zeta
 
 
-#: model name (parameter ``prediction_model``) -> factory from the model parameters
-PREDICTION_MODELS: dict[str, Callable[[ModelParams], PredictionModel]] = {
+class SingleTrackActuatorModel:
+    """Eq. (1) with the steering actuators' first-order lag (``actuator_model``): state
+    [ζ; δf,act; δr,act], linearised exactly at (ζ0, u0)."""
+
+    name = "single_track_actuators"
+    n_state = actuator_model.N_STATE_ACT
+
+    def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
+        self.params = params
+        self.discretisation = discretisation
+        self._disc = _discretiser(discretisation)
+
+    def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A_k, B_k, d_k) of the extended model, (8, 8), (8, 3), (8,)."""
+        return self._disc(*actuator_model.jacobians(zeta, u, self.params), zeta, u, dt_s)
+
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
+                       ) -> np.ndarray:
+        """[ζ; δf,act; δr,act] with the measured road-wheel angles."""
+        return np.concatenate([zeta[:N_STATE], [steer_front, steer_rear]])
+
+
+#: model name (parameter ``prediction_model``) -> factory from the model parameters and the
+#: discretisation (parameter ``prediction_discretisation``)
+PREDICTION_MODELS: dict[str, Callable[..., PredictionModel]] = {
     "single_track": SingleTrackModel,
+    "single_track_actuators": SingleTrackActuatorModel,
 }
 
 
-def make_prediction_model(name: str, params: ModelParams) -> PredictionModel:
+def make_prediction_model(name: str, params: ModelParams, discretisation: str = "euler"
+                          ) -> PredictionModel:
     """The model called ``name`` (:data:`PREDICTION_MODELS`)."""
-    return choose(PREDICTION_MODELS, name, "prediction_model")(params)
+    return choose(PREDICTION_MODELS, name, "prediction_model")(params, discretisation)

@@ -5,6 +5,10 @@ Augmented model, eq. (5), with the affine term of the linearisation (``model.dis
     ξ = [ζ; u(k−1)] (9),  Ã = [[A_k, B_k], [0, I]],  B̃ = [[B_k], [I]],  d̃ = [d_k; 0]
     ξ(k+1) = Ã ξ(k) + B̃ Δu(k) + d̃
 
+The state dimension is the model's (taken from A_k: 6 for eq. (1), 8 with the steering
+actuators of ``actuator_model``, whose states follow ``StateIdx.X``), so ξ has n + 3 entries;
+the output rows and the sparsity pattern of one (Np, Nc) do not depend on it.
+
 Prediction over i = 1..Np with Δu(k+j) = 0 for j ≥ Nc, eq. (6) plus the affine column::
 
     y(k+i) = C Ã^i ξ(k) + Σ_{j<min(i,Nc)} C Ã^{i−1−j} B̃ Δu(k+j) + Σ_{m<i} C Ã^m d̃
@@ -57,7 +61,6 @@ from fourws_mpc.core.qp_solver import (
     QpStatus,
 )
 
-N_AUG = N_STATE + N_INPUT
 _EYE_U = np.eye(N_INPUT)
 _ZERO_U = np.zeros(N_INPUT)
 #: rows of the augmented state picked by C: outputs (φ, Y) then hard-bounded states (vy, r)
@@ -68,11 +71,13 @@ _INF = np.inf
 
 def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Augmented matrices of eq. (5): Ã (9, 9), B̃ (9, 3), d̃ (9,)."""
-    Aa = np.zeros((N_AUG, N_AUG))
-    Aa[:N_STATE, :N_STATE] = Ak
-    Aa[:N_STATE, N_STATE:] = Bk
-    Aa[N_STATE:, N_STATE:] = _EYE_U
+    """Augmented matrices of eq. (5) for a model of n states (A_k (n, n)): Ã (n+3, n+3),
+    B̃ (n+3, 3), d̃ (n+3,); (9, 9), (9, 3), (9,) for eq. (1)."""
+    n = Ak.shape[0]
+    Aa = np.zeros((n + N_INPUT, n + N_INPUT))
+    Aa[:n, :n] = Ak
+    Aa[:n, n:] = Bk
+    Aa[n:, n:] = _EYE_U
     Ba = np.vstack([Bk, _EYE_U])
     da = np.concatenate([dk, _ZERO_U])
     return Aa, Ba, da
@@ -83,9 +88,10 @@ def _clip(x: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.n
     return np.minimum(np.maximum(x, lo), hi)
 
 
-def output_matrix(rows: tuple[int, ...] = OUT_ROWS) -> np.ndarray:
-    """C̃ picking ``rows`` of the augmented state, shape (len(rows), 9)."""
-    C = np.zeros((len(rows), N_AUG))
+def output_matrix(rows: tuple[int, ...] = OUT_ROWS, n_state: int = N_STATE) -> np.ndarray:
+    """C̃ picking ``rows`` of the augmented state of a model of ``n_state`` states, shape
+    (len(rows), n_state + 3)."""
+    C = np.zeros((len(rows), n_state + N_INPUT))
     C[np.arange(len(rows)), list(rows)] = 1.0
     return C
 
@@ -108,7 +114,7 @@ def matrix_powers(A: np.ndarray, n: int) -> np.ndarray:
 
 def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int, n_c: int
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ψ (no·Np, 9), Θ (no·Np, 3·Nc) of eq. (6) and Γ (no·Np, 9) of the affine term.
+    """Ψ (no·Np, n+3), Θ (no·Np, 3·Nc) of eq. (6) and Γ (no·Np, n+3) of the affine term.
 
     Rows are ordered step-major (i = 1..Np, then the no outputs of C); columns of Θ step-major
     (j = 0..Nc−1, then the 3 inputs). Y = Ψ ξ + Θ ΔU + Γ d̃.
@@ -116,7 +122,7 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
     no = C.shape[0]
     nu = Ba.shape[1]
     P = matrix_powers(Aa, n_p)
-    CP = C @ P                                   # (Np+1, no, 9): C Ã^m
+    CP = C @ P                                   # (Np+1, no, n+3): C Ã^m
     psi = CP[1:].reshape(no * n_p, -1)
     G = CP[:n_p] @ Ba                            # (Np, no, nu): C Ã^m B̃, m = 0..Np−1
     m = np.arange(n_p)[:, None] - np.arange(n_c)[None, :]   # i−1−j
@@ -240,7 +246,7 @@ class MpcQp:
         self.settings = settings if settings is not None else QpSettings()
         self.solver: QpSolver = solver if solver is not None else OsqpSolver(self.settings)
         self.instances: dict[tuple[int, int], QpLayout] = {}
-        self._C = output_matrix()
+        self._C: dict[int, np.ndarray] = {N_STATE: output_matrix()}   # per state dimension
 
     def instance(self, n_p: int, n_c: int) -> QpLayout:
         """The layout of (Np, Nc), created (and prepared in the solver) on first use."""
@@ -263,7 +269,8 @@ class MpcQp:
     ) -> QpSolution:
         """Solve one MPC step.
 
-        Ak (6,6), Bk (6,3), dk (6,): model of eq. (4); zeta0 (6,), u_prev (3,) = u(k−1);
+        Ak (n,n), Bk (n,3), dk (n,): model of eq. (4) (n = 6 for eq. (1), more for a model
+        with appended states); zeta0 (n,), u_prev (3,) = u(k−1);
         ref (Np, 2): [φ_ref, Y_ref] at i = 1..Np; q_eff (2,) = [q_φ, q_Y] and r_eff (3,) the
         effective weights of the scaled cost; rho the slack weight; warm_du_scaled (Nc, 3)
         optional primal warm start in units of Δu_max.
@@ -272,7 +279,10 @@ class MpcQp:
         inst = self.instance(n_p, n_c)
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
-        psi, theta, gamma = prediction_matrices(Aa, Ba, self._C, n_p, n_c)
+        C = self._C.get(Ak.shape[0])
+        if C is None:
+            C = self._C[Ak.shape[0]] = output_matrix(n_state=Ak.shape[0])
+        psi, theta, gamma = prediction_matrices(Aa, Ba, C, n_p, n_c)
         free = (psi @ xi + gamma @ da).reshape(n_p, N_OUT)
         D, en, u_max_t, band = inst.tiled(bounds)
         th = (theta * D[None, :]).reshape(n_p, N_OUT, nu * n_c)
