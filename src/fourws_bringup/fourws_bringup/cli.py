@@ -8,7 +8,7 @@
     fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
     fourws margins --controller NAME --scenario NAME_OR_YAML [--speed-kmh V]
                    [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
-    fourws sweep SPEC.yaml --out DIR [--workers N]
+    fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
     fourws scenarios | fourws controllers
 """
 
@@ -203,7 +203,7 @@ def _cmd_margins(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import sweep_cli
 
-    return sweep_cli(args.spec, args.out, args.workers)
+    return sweep_cli(args.spec, args.out, args.workers, args.scheduler)
 
 
 def _cmd_list(kind: str) -> int:
@@ -296,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("spec", help="sweep spec YAML (see fourws_bringup.sweep)")
     w.add_argument("--out", required=True, help="output folder")
     w.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    w.add_argument("--scheduler", default=None, help="run on the Dask distributed cluster of "
+                   "this scheduler address (e.g. tcp://host:8786) instead of local processes")
     w.set_defaults(func=_cmd_sweep)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
