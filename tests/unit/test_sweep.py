@@ -103,6 +103,23 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
             j.scenario)
 
 
+def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
+    from pathlib import Path
+
+    from fourws_bringup.core.closed_loop import run_closed_loop as run
+
+    spec = Path(__file__).resolve().parents[2] / "benchmarks" / "ranking_study.yaml"
+    jobs = load_spec(spec)
+    assert len(jobs) == 140 and len({j.key for j in jobs}) == 140
+    by = {j.condition.name: j.condition for j in jobs}
+    assert by["relaxation_x0"].vehicle_overrides == {"tyre_relaxation_peak_over_radius": 0}
+    assert by["scaling_k1"].mpc_overrides == {"scale_y_m": 0.0059, "scale_phi_deg": 0.3}
+    # k = 1 is the shipped scaling: the same run as no override
+    a = run("dlc_60_mu05", "improved", 150, condition=by["scaling_k1"])
+    b = run("dlc_60_mu05", "improved", 150)
+    assert a.metrics()["max_abs_lateral_error_m"] == b.metrics()["max_abs_lateral_error_m"]
+
+
 def test_the_distributed_path_gives_the_same_csv_as_the_local_one(swept, tmp_path):
     """A Dask distributed cluster of two worker processes (``LocalCluster``, the same client
     code as ``--scheduler tcp://host:8786``) returns the local sweep's rows, in job order: the

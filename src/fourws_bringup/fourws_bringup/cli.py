@@ -176,13 +176,21 @@ def _cmd_bag(args: argparse.Namespace) -> int:
 def _cmd_margins(args: argparse.Namespace) -> int:
     import json
 
+    import yaml
+
     from fourws_sim.core.scenario import load_scenario
 
     from .core.configs import load_mpc_config
     from .core.margins import margins
 
     try:
-        cfg = load_mpc_config(args.controller)
+        overrides = {}
+        for item in args.set or []:
+            key, sep, value = item.partition("=")
+            if not sep or not key:
+                raise ValueError(f"--set {item!r}: expected KEY=VALUE")
+            overrides[key.strip()] = yaml.safe_load(value)
+        cfg = load_mpc_config(args.controller, overrides)
         sc = load_scenario(args.scenario)
         vx = args.speed_kmh / 3.6 if args.speed_kmh is not None else sc.speed_mps
         if not 1.0 <= vx <= 70.0:
@@ -195,7 +203,8 @@ def _cmd_margins(args: argparse.Namespace) -> int:
         return 2
     out = {"controller": args.controller, "scenario": sc.name, "speed_kmh": vx * 3.6,
            "delay_periods": args.delay_periods, "steer_dead_time_ms": args.steer_dead_time_ms,
-           "tyre_relaxation": not args.no_relaxation, **m.as_dict()}
+           "tyre_relaxation": not args.no_relaxation, "mpc_overrides": overrides,
+           **m.as_dict()}
     print(json.dumps(out, indent=2))
     return 0
 
@@ -289,6 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--steer-dead-time-ms", type=float, default=0.0,
                    help="steering dead time (rounded to control periods)")
     g.add_argument("--no-relaxation", action="store_true", help="tyres without relaxation")
+    g.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override an MPC parameter of the preset (repeatable), e.g. "
+                        "--set prediction_model=single_track_actuators --set "
+                        "input_delay_periods=1 (the controller's known delay)")
     g.set_defaults(func=_cmd_margins)
 
     w = sub.add_parser("sweep", help="controllers x scenarios x conditions x seeds in the "
