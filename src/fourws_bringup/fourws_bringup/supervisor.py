@@ -169,16 +169,18 @@ def _merge_orders(orders: list[list[str]], what: str) -> list[str]:
 
 
 def _param_literal(v: object) -> str:
-    """``v`` as the YAML value of ``-p name:=value``; a string that YAML would read as
-    something else (a mapping, a number, ``true``) is double-quoted so it stays a string."""
+    """``v`` as the YAML value of ``-p name:=value``. A string is passed as written (so
+    ``"[/a,/b]"`` stays a YAML list, as on a ``ros2 run`` command line), except one that YAML
+    reads as a mapping (``{a: 1}``): no parameter can hold a mapping, so such a string is
+    meant as text (``vehicle_overrides``) and is double-quoted to stay one."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, str):
         try:
-            same = yaml.safe_load(v) == v
+            mapping = isinstance(yaml.safe_load(v), dict)
         except yaml.YAMLError:
-            same = False
-        return v if same else json.dumps(v)
+            mapping = False
+        return json.dumps(v) if mapping else v
     return repr(v)
 
 
