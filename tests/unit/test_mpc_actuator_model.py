@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from numdiff_helpers import central_jacobian
 
 from fourws_mpc.core import actuator_model as M
 from fourws_mpc.core import qp as Q
@@ -24,15 +25,6 @@ A_ = M.ActIdx
 T = 0.01
 
 
-def _fd(fun, x0, h):
-    cols = []
-    for i in range(len(x0)):
-        e = np.zeros(len(x0))
-        e[i] = h[i]
-        cols.append((fun(x0 + e) - fun(x0 - e)) / (2 * h[i]))
-    return np.column_stack(cols)
-
-
 def _point(seed):
     rng = np.random.default_rng(seed)
     z = np.array([rng.uniform(-1, 1), rng.uniform(5, 30), rng.uniform(-3, 3),
@@ -49,9 +41,9 @@ def test_extended_jacobians_match_central_differences(seed):
     np.testing.assert_allclose(f0, M.dynamics(z, u, P))
     hz = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-5, 1e-5, 1e-7, 1e-7])
     hu = np.array([1e-7, 1e-7, 1e-3])
-    np.testing.assert_allclose(A, _fd(lambda x: M.dynamics(x, u, P), z, hz),
+    np.testing.assert_allclose(A, central_jacobian(lambda x: M.dynamics(x, u, P), z, hz),
                                rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(B, _fd(lambda v: M.dynamics(z, v, P), u, hu),
+    np.testing.assert_allclose(B, central_jacobian(lambda v: M.dynamics(z, v, P), u, hu),
                                rtol=1e-5, atol=1e-8)
 
 

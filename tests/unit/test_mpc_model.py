@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from numdiff_helpers import central_jacobian
 
 from fourws_mpc.core.model import (
     InputIdx,
@@ -16,15 +17,6 @@ from fourws_mpc.core.model import (
 )
 
 P = ModelParams()
-
-
-def _fd(fun, x0, h):
-    cols = []
-    for i in range(len(x0)):
-        e = np.zeros(len(x0))
-        e[i] = h[i]
-        cols.append((fun(x0 + e) - fun(x0 - e)) / (2 * h[i]))
-    return np.column_stack(cols)
 
 
 def _random_points(n, seed=0):
@@ -44,8 +36,8 @@ def test_jacobians_match_central_differences(k):
     np.testing.assert_allclose(f0, dynamics(z, u, P))
     hz = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-5, 1e-5])
     hu = np.array([1e-7, 1e-7, 1e-3])
-    A_fd = _fd(lambda x: dynamics(x, u, P), z, hz)
-    B_fd = _fd(lambda v: dynamics(z, v, P), u, hu)
+    A_fd = central_jacobian(lambda x: dynamics(x, u, P), z, hz)
+    B_fd = central_jacobian(lambda v: dynamics(z, v, P), u, hu)
     np.testing.assert_allclose(A, A_fd, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(B, B_fd, rtol=1e-5, atol=1e-8)
 

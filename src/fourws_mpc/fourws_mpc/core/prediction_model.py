@@ -77,17 +77,21 @@ def _discretiser(name: str) -> Callable:
     return affine_euler if name == "euler" else affine_zoh
 
 
-class SingleTrackModel:
-    """The paper's 3-DOF single-track model, eq. (1)-(4), linearised exactly at (ζ0, u0)
-    (``model.discretise``; with ``zoh``, the hold-equivalent of the same linearisation)."""
-
-    name = "single_track"
-    n_state = N_STATE
+class _Discretised:
+    """What both models share: their parameters and the chosen discretisation."""
 
     def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
         self.params = params
         self.discretisation = discretisation
         self._disc = _discretiser(discretisation)
+
+
+class SingleTrackModel(_Discretised):
+    """The paper's 3-DOF single-track model, eq. (1)-(4), linearised exactly at (ζ0, u0)
+    (``model.discretise``; with ``zoh``, the hold-equivalent of the same linearisation)."""
+
+    name = "single_track"
+    n_state = N_STATE
 
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -102,17 +106,12 @@ class SingleTrackModel:
         return zeta
 
 
-class SingleTrackActuatorModel:
+class SingleTrackActuatorModel(_Discretised):
     """Eq. (1) with the steering actuators' first-order lag (``actuator_model``): state
     [ζ; δf,act; δr,act], linearised exactly at (ζ0, u0)."""
 
     name = "single_track_actuators"
     n_state = actuator_model.N_STATE_ACT
-
-    def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
-        self.params = params
-        self.discretisation = discretisation
-        self._disc = _discretiser(discretisation)
 
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
