@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from fourws_bringup.core.configs import core_values
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import ns_to_stamp, stamp_to_ns
 from fourws_common.params import from_mapping, load_ros_params_yaml
@@ -31,10 +32,8 @@ pytestmark = pytest.mark.integration
 
 
 def load_pid_yaml(path: str, node: str) -> dict:
-    """speed_pid.yaml without the node-level input keys (InputConfig)."""
-    values = load_ros_params_yaml(path, node)
-    values.pop("sync", None)
-    return values
+    """speed_pid.yaml without the node-level input keys (``configs.core_values``)."""
+    return core_values(load_ros_params_yaml(path, node))
 CFG = config_dir("fourws_torque_alloc")
 
 

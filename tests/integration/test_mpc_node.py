@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from rclpy.duration import Duration
 
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import ns_to_stamp, stamp_to_ns
@@ -66,3 +67,49 @@ def test_mpc_node_answers_states_with_their_stamp_and_rejects_nan(graph, ros):
     assert d.lateral_error == pytest.approx(0.05, abs=0.01)
     # 5 cm left of the path: the controller steers right (negative) to come back.
     assert cmds[0][0].delta_front < 0.0
+
+
+def test_the_first_state_waits_until_the_outputs_have_their_subscribers(graph, ros):
+    """With ``wait_for_subscribers`` (lockstep) the MPC does not answer a run's first state
+    until its command and diagnostics publishers have matched that many subscriptions in
+    all: a subscriber that joins last (the recorder) still gets step 0. The lockstep plant
+    republishes a waiting state; the MPC answers the repeat once the last subscriber is
+    matched. (Slowness can only make the silent phase check less, never fail it.)"""
+    preset = config_dir("fourws_bringup") / "controllers" / "improved.yaml"
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)],
+                    parameters={"wait_for_subscribers": 3})])
+    cmds: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command",
+                                 lambda m: cmds.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+    ros.node.create_subscription(MpcDiagnostics, "/control/mpc_diagnostics", lambda m: None,
+                                 CONTROL_QOS)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0)
+    path = load_scenario("dlc_60_mu05").path
+    pub_ref.publish(ReferenceTrajectory(x=path.x.tolist(), y=path.y.tolist(),
+                                        yaw=path.yaw.tolist(),
+                                        curvature=path.curvature.tolist(),
+                                        speed=path.speed.tolist()))
+    assert ros.spin_until(lambda: pub_ref.wait_for_all_acked(Duration(seconds=0)), 10.0)
+    state = VehicleState(x=0.0, y=0.05, vx=16.667)
+    state.mu, state.fz = np.full(4, 0.5), np.full(4, 1800.0)
+    for _ in range(4):                          # two of three subscriptions: no answer
+        pub.publish(state)
+        ros.spin_until(lambda: bool(cmds), 0.25)
+    assert not cmds, "answered before every output subscriber was matched"
+    late: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command",
+                                 lambda m: late.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+
+    def answered() -> bool:
+        pub.publish(state)                      # the plant's republish of the waiting state
+        return ros.spin_until(lambda: 0 in late, 0.25)
+
+    assert ros.spin_until(answered, 20.0), "the third subscriber never got step 0"
+    assert 0 in cmds and late[0].delta_front == cmds[0].delta_front

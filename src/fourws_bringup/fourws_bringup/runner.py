@@ -162,16 +162,30 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     plant_params.update(bench["plant_node"])
     plant_params.update(extra_plant or {})
     sync = "lockstep" if mode == "lockstep" else "latest"
+    # Recording in lockstep: each controller answers its first state only once its outputs
+    # have matched every subscriber of the graph, the recorder among them. The recorder joins
+    # last and cannot get a volatile first message again (the control chain can: the plant
+    # republishes a waiting state and the controllers answer it from their caches).
+    waits: dict[str, dict] = {"mpc_node": {}, "speed_pid_node": {}, "allocator_node": {}}
+    if bag_dir is not None and mode == "lockstep":
+        waits = {
+            # mpc_command: plant, allocator, recorder; mpc_diagnostics: recorder
+            "mpc_node": {"wait_for_subscribers": 4},
+            "speed_pid_node": {"wait_for_subscribers": 2},   # drive_command: allocator, rec.
+            "allocator_node": {"wait_for_subscribers": 2},   # wheel_torques: plant, recorder
+        }
     specs = [
         NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
                  parameters=plant_params, end_codes=RUN_END_CODES),
         NodeSpec("mpc_node", "fourws_mpc", "mpc_node", params_files=files("mpc_node"),
-                 parameters={**bench["mpc_node"], "sync": sync}),
+                 parameters={**bench["mpc_node"], "sync": sync, **waits["mpc_node"]}),
         NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
-                 params_files=files("speed_pid_node"), parameters={"sync": sync}),
+                 params_files=files("speed_pid_node"),
+                 parameters={"sync": sync, **waits["speed_pid_node"]}),
         NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
                  params_files=files("allocator_node"),
-                 parameters={**bench["allocator_node"], "sync": sync}),
+                 parameters={**bench["allocator_node"], "sync": sync,
+                             **waits["allocator_node"]}),
     ]
     if use_sim_time:
         for spec in specs:

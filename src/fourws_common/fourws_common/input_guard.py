@@ -159,6 +159,11 @@ class InputConfig:
                       "only the newest state and answer it from a 1 ms steady timer, so a node "
                       "that fell behind (realtime) skips the backlog",
                       choices=("lockstep", "latest"))
+    wait_for_subscribers: int = param(
+        0, "lockstep: answer the first state of a run only once the node's per-step output "
+        "publishers have matched this many subscriptions in total (fourws run sets the "
+        "graph's count, the recorder included, so no subscriber misses step 0; the plant "
+        "asks again every republish period); 0: answer at once", lo=0, hi=100)
 
 
 def state_mu(mu: Any) -> float | None:

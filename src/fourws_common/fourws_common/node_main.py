@@ -1,5 +1,11 @@
 """The one ``main()`` shape every fourws node uses (Jazzy: ``rclpy.init`` is no context manager).
 
+Signals: SIGINT and SIGTERM request a stop: the executor's loop ends after the callback it is
+in, then every node is destroyed and rclpy shut down, in that order. (rclpy's own handlers
+shut the context down at once, under a running callback: a timer that logged then raised
+"publisher's context is invalid", which the executor reported as FATAL.) A node may install
+its own handlers in its constructor (the recorder drains first).
+
 Executor: rclpy's ``EventsExecutor`` (``rclpy.experimental``, in Jazzy) by default. At 100 Hz
 lockstep with ~15 message deliveries per step over six Python processes on two cores, the
 ``SingleThreadedExecutor`` spends much of its CPU rebuilding its wait set on every
@@ -11,6 +17,7 @@ went from a real-time factor of 1.37 to 2.25-2.33, with identical results. Set
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Callable, Sequence
 
@@ -20,6 +27,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from fourws_common.ros_params import check_overrides
@@ -63,7 +71,17 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     of them takes no inter-process hop. Spins until shutdown or until any node sets ``done``;
     the exit code is the first non-zero ``exit_code`` of a node, 2 for a bad parameter.
     """
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # A stop request ends the loop between callbacks (module docstring); installed before
+    # the nodes are built, so a node's own handlers replace it.
+    stop = Future()
+
+    def on_signal(_signum, _frame) -> None:
+        if not stop.done():
+            stop.set_result(True)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
     nodes: list[Node] = []
     code = 0
     try:
@@ -82,8 +100,6 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         # A node that ends by itself (the plant at the end of a scenario) sets ``done``; a
         # steady-clock timer notices it, so the executor's loop runs in C++ without a return
         # to Python after every callback (spin_once costs ~13 µs more per callback).
-        stop = Future()
-
         def poll_done() -> None:
             if not stop.done() and any(getattr(n, "done", False) for n in nodes):
                 stop.set_result(True)

@@ -10,7 +10,12 @@ Each state goes through, in this order:
 4. the stamp rule (:class:`~fourws_common.input_guard.StampGate`): a repeat is answered from
    the cache, a stamp in the past or the far future is rejected, a confirmed jump back is a
    new run (the node's core is reset), a confirmed jump ahead continues;
-5. the node's step; an exception in it is caught, logged with the state, and answered with
+5. the node's outputs must be matched (lockstep, ``wait_for_subscribers``, until the first
+   answer of a run): the first state is not answered until the node's ``outputs``
+   publishers have matched that many subscriptions in total, so a subscriber that joined
+   last (the recorder) gets step 0 too; the lockstep plant publishes the waiting state
+   again, and it is answered then;
+6. the node's step; an exception in it is caught, logged with the state, and answered with
    the node's held output. A callback never kills the node.
 """
 
@@ -57,12 +62,15 @@ class StateInput:
     """
 
     def __init__(self, node: Node, health: NodeHealth, checked: Sequence[str],
-                 handlers: StateHandlers, core_name: str) -> None:
+                 handlers: StateHandlers, core_name: str, outputs: Sequence[Any] = ()) -> None:
         self._node, self._health, self._h = node, health, handlers
+        self._outputs = tuple(outputs)
+        self._outputs_matched = False  # checked until the first answer of a run only
         self._checked = tuple(checked)
         self._core_name = core_name
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
+        self._match_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self.latest = LatestInput(node, health.guard(VEHICLE_STATE.name, self._on_state),
                                   health)
         self.inputs = ParamBinding(node, InputConfig,
@@ -73,8 +81,23 @@ class StateInput:
                                  LATEST_QOS)
 
     def reset(self) -> None:
-        """Forget the stamps (a new run starts from any stamp)."""
+        """Forget the stamps (a new run starts from any stamp) and check the outputs' matches
+        again before the new run's first answer."""
         self.gate.reset()
+        self._outputs_matched = False
+
+    def _unmatched(self) -> list[str]:
+        """Output topics with fewer matched subscriptions than their count (lockstep), until
+        the first answer of a run: a subscriber that leaves mid-run never stalls the node."""
+        if self._outputs_matched:
+            return []
+        cfg = self.inputs.config
+        need = cfg.wait_for_subscribers if cfg.sync == "lockstep" else 0
+        counts = [pub.get_subscription_count() for pub in self._outputs] if need else []
+        if sum(counts) >= need:
+            self._outputs_matched = True
+            return []
+        return [f"{pub.topic_name} ({n})" for pub, n in zip(self._outputs, counts, strict=True)]
 
     def _on_state(self, msg: Any) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
@@ -85,6 +108,12 @@ class StateInput:
             return
         if not self._h.ready():
             self._wait_log(stamp_ns, "no reference trajectory yet: not answering states")
+            return
+        unmatched = self._unmatched()
+        if unmatched:
+            self._match_log(stamp_ns, f"waiting for {self.inputs.config.wait_for_subscribers} "
+                            f"matched subscriptions in all on {', '.join(unmatched)}: not "
+                            "answering states yet")
             return
         prev_ns = self.gate.last_ns
         verdict = self.gate.check(stamp_ns)

@@ -71,7 +71,7 @@ class MpcNode(Node):
             self, self.health, CHECKED_FIELDS,
             StateHandlers(ready=lambda: self.ref is not None, step=self._step,
                           repeat=self._repeat, held=self._answer_held, reset=self._reset),
-            "controller")
+            "controller", outputs=(self.pub_cmd, self.pub_diag))
         self.get_logger().info(f"controller '{self.params.config.controller}'")
 
     def _on_params(self, cfg: MpcConfig) -> None:

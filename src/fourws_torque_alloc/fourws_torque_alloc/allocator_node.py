@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from rclpy.node import Node
 
-from fourws_common.conversions import stamp_to_ns
+from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
@@ -61,6 +61,10 @@ class AllocatorNodeConfig(AllocatorConfig):
     sync: str = param("lockstep", "lockstep: answer each stamp once all inputs hold it; "
                       "latest: answer every drive command with the latest inputs",
                       choices=("lockstep", "latest"))
+    wait_for_subscribers: int = param(
+        0, "lockstep: answer only once /control/wheel_torques has matched this many "
+        "subscriptions (fourws run sets the graph's count, the recorder included); the plant "
+        "asks again every republish period; 0: answer at once", lo=0, hi=100)
 
     def core(self) -> AllocatorConfig:
         return AllocatorConfig(**{f.name: getattr(self, f.name)
@@ -85,6 +89,7 @@ class AllocatorNode(Node):
         self.last_valid = np.zeros(4)
         self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
         self.health = NodeHealth(self)
+        self._match_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
         self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.name, qos_of(WHEEL_TORQUES))
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
@@ -168,12 +173,26 @@ class AllocatorNode(Node):
         store[stamp_ns] = msg
         if len(store) > MAX_HELD:  # strays that no state will ever match
             del store[min(store)]
-        if stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs:
+        if (stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs
+                and self._outputs_matched()):
             self._answer(stamp_ns, self.states.pop(stamp_ns), self.drives.pop(stamp_ns),
                          self.mpcs.pop(stamp_ns))
             for d in (self.states, self.drives, self.mpcs):
                 for k in [k for k in d if k <= stamp_ns]:
                     del d[k]
+
+    def _outputs_matched(self) -> bool:
+        """Lockstep, until the first answer of a run: /control/wheel_torques has matched
+        ``wait_for_subscribers`` subscriptions (a subscriber that leaves mid-run never
+        stalls the allocator). Held inputs wait; the plant's republished state retries."""
+        need = self.params.config.wait_for_subscribers
+        if self.last_stamp_ns is not None or not need:
+            return True
+        have = self.pub.get_subscription_count()
+        if have < need:
+            self._match_log(0, f"waiting for subscribers on {WHEEL_TORQUES.name} "
+                            f"({have}/{need}): not answering yet")
+        return have >= need
 
     def _answer(self, stamp_ns: int, state: VehicleState, drive: DriveCommand,
                 mpc: MpcCommand) -> None:

@@ -48,7 +48,7 @@ class SpeedPidNode(Node):
             self, self.health, ("x", "y", "vx"),
             StateHandlers(ready=lambda: self.profile is not None, step=self._step,
                           repeat=self._repeat, held=self._held, reset=self._reset),
-            "PID")
+            "PID", outputs=(self.pub,))
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
         self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless
