@@ -4,8 +4,8 @@ loop at every speed, and zero steady-state offset in a constant turn with the fe
 import numpy as np
 import pytest
 
-from fourws_mpc.core.lqr import LqrLateral, LqrWeights, dlqr_gain, error_model, zoh
-from fourws_mpc.core.model import ModelParams
+from fourws_mpc.core.lqr import LqrLateral, LqrWeights, dlqr_gain, error_model
+from fourws_mpc.core.model import ModelParams, zoh
 
 P = ModelParams(c_cf=27994.0, c_cr=29999.0)
 DT = 0.01

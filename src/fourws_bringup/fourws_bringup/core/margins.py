@@ -47,7 +47,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
@@ -55,7 +54,7 @@ from fourws_mpc.core.delay import channel_delays, register_schedule
 from fourws_mpc.core.fuzzy_weights import FuzzyWeights
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
-from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
+from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
 from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
 from fourws_sim.core.actuators import motor_state_space
@@ -117,14 +116,6 @@ def plant_matrices(v: VehicleParams, vx: float, relaxation: bool = True
     return A, B
 
 
-def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    n, k = B.shape
-    M = np.zeros((n + k, n + k))
-    M[:n, :n], M[:n, n:] = A, B
-    E = scipy.linalg.expm(M * dt)
-    return E[:n, :n], E[:n, n:]
-
-
 def _zeta(n_model: int, n_ext: int) -> np.ndarray:
     """Map (n_model, n_ext) from the plant state to the MPC's path-frame ζ (vx deviation 0,
     X 0; the actual steering angles for a model with actuator states)."""
@@ -184,7 +175,7 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     """(A_cl, A_open, B_f, K_f): the closed-loop matrix per period, and the loop broken at
     the front steer command (x+ = A_open x + B_f w, the controller's front steer = K_f x)."""
     dt = cfg.dt_s
-    Ap, Bp = _zoh(*plant_matrices(v, vx, relaxation), dt)
+    Ap, Bp = zoh(*plant_matrices(v, vx, relaxation), dt)
     n_dead = int(round(steer_dead_time_s / dt))
     # the controller's known delays and its buffer of commands sent (register i = u(k−1−i))
     known = channel_delays(cfg.input_delay_periods, cfg.steer_dead_time_s, dt)

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from fourws_mpc.core.model import ModelParams
+from fourws_mpc.core.model import ModelParams, zoh
 
 
 class ErrIdx:
@@ -85,15 +85,6 @@ def error_model(p: ModelParams, vx: float) -> tuple[np.ndarray, np.ndarray, np.n
     Bk = np.array([[0.0], [(-cf * a + cr * b) / (m * vx) - vx], [0.0],
                    [-(cf * a * a + cr * b * b) / (iz * vx)]])
     return A, B, Bk
-
-
-def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-order-hold discretisation (A_d, B_d) by the matrix exponential."""
-    n, m = B.shape
-    M = np.zeros((n + m, n + m))
-    M[:n, :n], M[:n, n:] = A, B
-    E = scipy.linalg.expm(M * dt_s)
-    return E[:n, :n], E[:n, n:]
 
 
 def dlqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np.ndarray:

@@ -43,10 +43,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+import scipy.linalg
 
 N_STATE = 6
 N_INPUT = 3
-_EYE_STATE = np.eye(N_STATE)
 
 
 class StateIdx(IntEnum):
@@ -172,19 +172,42 @@ def jacobians(
     return f0, A, B
 
 
+def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold discretisation (A_d, B_d) of ẋ = A x + B u by the matrix exponential
+    expm(T [[A, B], [0, 0]]) = [[A_d, B_d], [0, I]] (the one copy: MPC, LQR, margins)."""
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A, B
+    E = scipy.linalg.expm(M * dt_s)
+    return E[:n, :n], E[:n, n:]
+
+
+def affine_euler(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
+                 u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward Euler of the linearisation at (ζ0, u0), eq. (4): A_k = I + T A_t,
+    B_k = T B_t, d_k = T (f0 − A_t ζ0 − B_t u0), exact at the operating point."""
+    Ak = dt_s * At
+    Ak.flat[::Ak.shape[0] + 1] += 1.0          # I + T A_t without building I
+    return Ak, dt_s * Bt, dt_s * (f0 - At @ zeta0 - Bt @ u0)
+
+
+def affine_zoh(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
+               u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact zero-order hold of the same linearisation: the constant term
+    c = f0 − A_t ζ0 − B_t u0 is a held input, so d_k is its column of :func:`zoh`."""
+    Ad, Bd = zoh(At, np.column_stack([Bt, f0 - At @ zeta0 - Bt @ u0]), dt_s)
+    return Ad, Bd[:, :-1], Bd[:, -1].copy()
+
+
 def discretise(
     zeta0: np.ndarray, u0: np.ndarray, p: ModelParams, dt_s: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward-Euler LTV model of eq. (4) linearised at (ζ0, u0).
+    """Forward-Euler LTV model of eq. (4) linearised at (ζ0, u0) (:func:`affine_euler`).
 
     Returns ``(A_k, B_k, d_k)`` with ζ(k+1) = A_k ζ + B_k u + d_k, exact at (ζ0, u0):
     A_k = I + T A_t (6, 6), B_k = T B_t (6, 3), d_k = T (f0 − A_t ζ0 − B_t u0) (6,).
     """
-    f0, At, Bt = jacobians(zeta0, u0, p)
-    Ak = _EYE_STATE + dt_s * At
-    Bk = dt_s * Bt
-    dk = dt_s * (f0 - At @ zeta0 - Bt @ u0)
-    return Ak, Bk, dk
+    return affine_euler(*jacobians(zeta0, u0, p), zeta0, u0, dt_s)
 
 
 def euler_step(zeta: np.ndarray, u: np.ndarray, p: ModelParams, dt_s: float) -> np.ndarray:

@@ -28,11 +28,12 @@ from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
-import scipy.linalg
 
 from fourws_common.params import choose
 from fourws_mpc.core import actuator_model
-from fourws_mpc.core.model import N_STATE, ModelParams, discretise, jacobians
+from fourws_mpc.core.model import N_STATE, ModelParams, affine_euler, affine_zoh, jacobians
+
+__all__ = ["affine_euler", "affine_zoh"]  # the discretisations live in model.py
 
 DISCRETISATIONS = ("euler", "zoh")
 
@@ -49,25 +50,6 @@ class PredictionModel(Protocol):
     def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
                        ) -> np.ndarray:
         """The model's state from ζ of eq. (1) (6,) and the actual road-wheel angles."""
-
-
-def affine_euler(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
-                 u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward Euler of the linearisation, eq. (4)."""
-    return (np.eye(At.shape[0]) + dt_s * At, dt_s * Bt,
-            dt_s * (f0 - At @ zeta0 - Bt @ u0))
-
-
-def affine_zoh(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
-               u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact zero-order-hold discretisation of the linearisation (module docstring)."""
-    n, m = Bt.shape
-    M = np.zeros((n + m + 1, n + m + 1))
-    M[:n, :n] = At
-    M[:n, n:n + m] = Bt
-    M[:n, n + m] = f0 - At @ zeta0 - Bt @ u0
-    E = scipy.linalg.expm(dt_s * M)
-    return E[:n, :n], E[:n, n:n + m], E[:n, n + m].copy()
 
 
 def _discretiser(name: str) -> Callable:
@@ -96,8 +78,6 @@ class SingleTrackModel(_Discretised):
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of eq. (4)."""
-        if self.discretisation == "euler":
-            return discretise(zeta, u, self.params, dt_s)
         return self._disc(*jacobians(zeta, u, self.params), zeta, u, dt_s)
 
     def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
