@@ -134,3 +134,33 @@ def test_the_buffer_is_committed_with_the_step_resized_with_the_config_and_reset
     np.testing.assert_array_equal(ctrl.sent.registers, [sent[2], sent[1], sent[1]])
     ctrl.reset()
     assert not ctrl.sent.registers.any() and ctrl.sent.registers.shape == (3, 3)
+
+
+def test_hard_bounds_are_relaxed_to_where_the_compensated_qp_starts():
+    """"No worse than now" must mean the state the QP starts from: after a compensated delay
+    the predicted |r| can exceed both the bound and the measured |r|; relaxing to the
+    measurement alone left such QPs infeasible (fallback on every one of these starts)."""
+    from fourws_bringup.core.configs import load_mpc_config
+    from fourws_mpc.core.controller import MpcController, VehicleSample
+    from fourws_sim.core.scenario import load_scenario
+
+    p = load_scenario("dlc_60_mu05").path
+    cfg = load_mpc_config("improved", {"input_delay_periods": 10})
+    ref = cfg.reference(p.x, p.y, p.yaw, p.curvature, p.speed)
+    for u in (0.1, 0.15):                      # front steer already sent, held over the delay
+        for r in (0.0, 0.1, 0.2, 0.3):
+            c = MpcController(cfg)
+            c.reset(u_prev=np.array([u, 0.0, 0.0]))
+            res = c.step(0.0, VehicleSample(x=10.0, y=0.0, yaw=0.0, vx=16.7, vy=0.0,
+                                            yaw_rate=r), ref, mu=0.5)
+            assert not res.fallback and res.solver_status == "solved", (u, r)
+
+
+def test_forward_euler_of_a_steering_lag_shorter_than_two_periods_is_refused():
+    from fourws_mpc.core.config import MpcConfig
+
+    with pytest.raises(ValueError, match="prediction_discretisation: zoh"):
+        MpcConfig(prediction_model="single_track_actuators", prediction_discretisation="euler",
+                  steer_front_time_constant_s=0.015)
+    MpcConfig(prediction_model="single_track_actuators", prediction_discretisation="zoh",
+              steer_front_time_constant_s=0.015)

@@ -198,6 +198,14 @@ class MpcConfig:
                 raise ValueError("nc_baseline: must lie in [nc_min, nc_max] with APCHA")
             if self.np_min // 3 < 1:
                 raise ValueError("np_min: ⌊np_min/3⌋ must be >= 1 for the N_c clamp of eq. (15)")
+        if (self.prediction_model == "single_track_actuators"
+                and self.prediction_discretisation == "euler"):
+            tau = min(self.steer_front_time_constant_s, self.steer_rear_time_constant_s)
+            if tau < 2.0 * self.dt_s:
+                raise ValueError(
+                    f"steer_front/rear_time_constant_s: forward Euler of a {tau} s lag at "
+                    f"dt_s = {self.dt_s} s has the pole 1 − T/τ = {1 - self.dt_s / tau:.2f} "
+                    "(unstable or oscillating below τ = 2T); use prediction_discretisation: zoh")
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], *, strict: bool = True) -> MpcConfig:

@@ -353,8 +353,11 @@ class MpcController:
         mu_b = c.mu_default if mu is None else max(float(mu), 0.01)
         bounds = QpBounds(
             du_max=self._du_max, u_max=self._u_max, enabled=self._enabled,
-            vy_max=max(vxb * math.tan(math.radians(c.max_sideslip_deg)), abs(s.vy)),
-            r_max=max(c.yaw_rate_mu_factor * mu_b * G / vxb, abs(s.yaw_rate)),
+            # "no worse than now": where the QP starts, i.e. after a compensated delay
+            vy_max=max(vxb * math.tan(math.radians(c.max_sideslip_deg)), abs(s.vy),
+                       abs(pred.zeta[StateIdx.VY])),
+            r_max=max(c.yaw_rate_mu_factor * mu_b * G / vxb, abs(s.yaw_rate),
+                      abs(pred.zeta[StateIdx.R])),
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
