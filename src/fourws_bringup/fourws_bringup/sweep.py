@@ -45,7 +45,7 @@ import numpy as np
 
 from fourws_common.params import read_yaml_file
 
-from .core.conditions import Condition, condition_from_mapping
+from .core.conditions import Condition, condition_from_mapping, node_parameters
 
 SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
 GROUP_KEYS = {"controllers", "scenarios", "conditions"}
@@ -219,7 +219,7 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
         aborted = sum(1 for r in rs if not r.get("completed"))
         try:
             cnd = conds[cond]
-            cfg = load_mpc_config(c, dict(cnd.mpc_overrides))
+            cfg = load_mpc_config(c, node_parameters(cnd)["mpc_node"])
             scn = load_scenario(sc)
             mg = margins(cfg, scn.vehicle, scn.speed_mps, delay_periods=cnd.delay_periods,
                          steer_dead_time_s=cnd.steer_dead_time_s)

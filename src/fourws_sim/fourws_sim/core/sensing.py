@@ -91,6 +91,11 @@ class MeasurementNoise:
         self._channels = {name: NoiseChannel(spec, self.dt_s, self.seed, name)
                           for name, spec in self.specs.items() if spec.sigma > 0.0}
 
+    @property
+    def active(self) -> bool:
+        """Some channel has noise (σ > 0)."""
+        return bool(self._channels)
+
     def errors(self) -> dict[str, float]:
         """The next error of every noisy channel (name -> value)."""
         return {name: ch.sample() for name, ch in self._channels.items()}
@@ -185,7 +190,7 @@ class Sensors:
         self.noise = MeasurementNoise(dict(noise or {}), dt_s, seed)
         self.tyre_forces = tyre_forces
         self.delay = DelayLine(delay_periods, initial_command)
-        self.sensed = bool(self.noise._channels) or tyre_forces != "oracle"
+        self.sensed = self.noise.active or tyre_forces != "oracle"
         self.ideal = not self.sensed and delay_periods == 0
 
     def measure(self, out: Any) -> Any:
