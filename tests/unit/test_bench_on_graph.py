@@ -106,3 +106,12 @@ def test_string_parameters_stay_strings_on_the_command_line():
     assert _param_literal('{"a": 0.05}') == '"{\\"a\\": 0.05}"'   # a mapping: text
     assert _param_literal("[/a,/b]") == "[/a,/b]"        # YAML on purpose, as on ros2 run
     assert _param_literal([0.0, 0.02]) == "[0.0, 0.02]"
+
+
+def test_known_delays_are_told_to_the_mpc_only_when_asked():
+    base = {"delay_periods": 1, "steer_dead_time_ms": 40}
+    assert node_parameters(condition_from_mapping(base))["mpc_node"] == {}
+    told = node_parameters(condition_from_mapping({**base, "known_delays": True}))["mpc_node"]
+    assert told == {"input_delay_periods": 1, "steer_dead_time_s": pytest.approx(0.04)}
+    with pytest.raises(ValueError, match="known_delays"):
+        condition_from_mapping({**base, "known_delays": "yes"})

@@ -39,6 +39,10 @@ class Condition:
     mpc_overrides: Mapping[str, Any] = field(default_factory=dict)
     vehicle_overrides: Mapping[str, Any] = field(default_factory=dict)
     seed: int = 0
+    #: tell the MPC the delay and dead time (its ``input_delay_periods``,
+    #: ``steer_dead_time_s``), as a car's integrator who measured them would: the MPC then
+    #: compensates them (``fourws_mpc.core.delay``). Off: the controller does not know them.
+    known_delays: bool = False
 
     def __post_init__(self) -> None:
         if self.tyre_forces not in TYRE_SOURCES:
@@ -63,7 +67,7 @@ class Condition:
 IDEAL = Condition()
 
 _KEYS = {"name", "noise", "delay_periods", "steer_dead_time_ms", "tyre_forces", "mu_nominal",
-         "mpc_overrides", "vehicle_overrides", "seed"}
+         "mpc_overrides", "vehicle_overrides", "seed", "known_delays"}
 
 
 def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Condition:
@@ -80,7 +84,14 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         mu_nominal=float(d.get("mu_nominal", 0.8)),
         mpc_overrides=dict(d.get("mpc_overrides") or {}),
         vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
-        seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0))
+        seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0),
+        known_delays=_flag(d.get("known_delays", False), "known_delays"))
+
+
+def _flag(v: Any, name: str) -> bool:
+    if not isinstance(v, bool):
+        raise ValueError(f"{name}: expected true or false, got {v!r}")
+    return v
 
 
 def load_condition(arg: str, seed: int | None = None) -> Condition:
@@ -114,8 +125,9 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
       ``sensing.CHANNELS``, ``noise_seed``, ``delay_periods``, ``steer_dead_time_s``), whether
       the state carries the true tyre data (``tyre_forces``), plant overrides
       (``vehicle_overrides``, a YAML mapping) and ``publish_ground_truth``;
-    * ``mpc_node``: the model-mismatch overrides, and with estimated tyre data
-      ``mu_default`` = the nominal μ (the state carries no adhesion);
+    * ``mpc_node``: the model-mismatch overrides, with ``known_delays`` the delay and dead
+      time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ (the
+      state carries no adhesion);
     * ``allocator_node``: ``tyre_forces`` and ``mu_nominal``.
     """
     if condition.ideal:
@@ -134,6 +146,9 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
         plant["vehicle_overrides"] = json.dumps(dict(condition.vehicle_overrides),
                                                 sort_keys=True)
     mpc = dict(condition.mpc_overrides)
+    if condition.known_delays:
+        mpc.setdefault("input_delay_periods", int(condition.delay_periods))
+        mpc.setdefault("steer_dead_time_s", float(condition.steer_dead_time_s))
     alloc: dict[str, Any] = {}
     if condition.tyre_forces == "estimated":
         mpc.setdefault("mu_default", float(condition.mu_nominal))
