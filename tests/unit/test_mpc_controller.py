@@ -1,12 +1,13 @@
 """MPC controller: closed loop on the nonlinear eq. (1) model, fallback, input checks."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.controller import MpcController, VehicleSample
+from fourws_mpc.core.controller import STATE_BOUNDS_DROPPED, MpcController, VehicleSample
 from fourws_mpc.core.cost_scaling import effective_weights
 from fourws_mpc.core.model import ModelParams, StateIdx, dynamics
 from fourws_mpc.core.qp import QpSolution
@@ -21,8 +22,10 @@ def _straight(n=3001, length=300.0, v=V):
 
 
 def _cfg(**kw):
+    """The paper's MPC (eq. (1)-(4), forward Euler): the plant here is eq. (1) itself."""
     base = dict(weights_mode="fixed", horizons_mode="fixed", use_dyc=False,
-                osqp_prebuild=False)
+                osqp_prebuild=False, prediction_model="single_track",
+                prediction_discretisation="euler")
     base.update(kw)
     return MpcConfig(**base)
 
@@ -132,17 +135,26 @@ def test_failed_first_solve_holds_the_initial_command(monkeypatch):
     assert (r.delta_front, r.delta_rear, r.yaw_moment) == (0.0, 0.0, 0.0)
 
 
-def test_infeasible_hard_bounds_fall_back_without_nan():
+def test_infeasible_hard_bounds_are_dropped_and_said():
     ctrl = MpcController(_cfg(np_baseline=12))
     ref = _straight()
-    ok = ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0)
-    assert not ok.fallback
-    plan = ctrl.plan_u.copy()
+    assert not ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0).fallback
     # 20° of front steer already applied: the yaw rate rises by ~0.3 rad/s per step and the
     # 0.8°/step rate limit cannot stop it below 0.85 μ g / vx = 0.11 rad/s (μ = 0.2)
     ctrl.u_prev = np.array([math.radians(20.0), 0.0, 0.0])
     r = ctrl.step(0.01, VehicleSample(0.15, 0.05, 0.0, V, 0.0, 0.1), ref, mu=0.2)
-    assert r.fallback and "infeasible" in r.solver_status
+    assert not r.fallback and STATE_BOUNDS_DROPPED in r.solver_status
+    assert r.delta_front == pytest.approx(math.radians(20.0 - 0.8))  # steers back at the limit
+
+
+def test_a_failed_solve_falls_back_to_the_previous_plan_without_nan():
+    ctrl = MpcController(_cfg(np_baseline=12))
+    ref = _straight()
+    assert not ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0).fallback
+    plan = ctrl.plan_u.copy()
+    ctrl.update_config(dataclasses.replace(ctrl.cfg, osqp_max_iter=1, osqp_check_termination=1))
+    r = ctrl.step(0.01, VehicleSample(0.15, 0.3, 0.0, V, 0.0, 0.1), ref, mu=1.0)
+    assert r.fallback and "maximum iterations" in r.solver_status
     assert r.delta_front == pytest.approx(plan[1, 0])      # the previous plan, shifted
     assert all(math.isfinite(v) for v in (r.delta_front, r.delta_rear, r.yaw_moment))
 

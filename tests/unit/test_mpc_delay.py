@@ -139,7 +139,9 @@ def test_the_buffer_is_committed_with_the_step_resized_with_the_config_and_reset
 def test_hard_bounds_are_relaxed_to_where_the_compensated_qp_starts():
     """"No worse than now" must mean the state the QP starts from: after a compensated delay
     the predicted |r| can exceed both the bound and the measured |r|; relaxing to the
-    measurement alone left such QPs infeasible (fallback on every one of these starts)."""
+    measurement alone left such QPs infeasible (fallback on every one of these starts). With
+    the steering lag in the prediction the angle keeps moving after the start, and a QP that
+    is infeasible with the hard bounds is solved without them (said in the status)."""
     from fourws_bringup.core.configs import load_mpc_config
     from fourws_mpc.core.controller import MpcController, VehicleSample
     from fourws_sim.core.scenario import load_scenario
@@ -153,7 +155,7 @@ def test_hard_bounds_are_relaxed_to_where_the_compensated_qp_starts():
             c.reset(u_prev=np.array([u, 0.0, 0.0]))
             res = c.step(0.0, VehicleSample(x=10.0, y=0.0, yaw=0.0, vx=16.7, vy=0.0,
                                             yaw_rate=r), ref, mu=0.5)
-            assert not res.fallback and res.solver_status == "solved", (u, r)
+            assert not res.fallback and res.solver_status.startswith("solved"), (u, r)
 
 
 def test_forward_euler_of_a_steering_lag_shorter_than_two_periods_is_refused():

@@ -9,6 +9,7 @@
     fourws margins --controller NAME --scenario NAME_OR_YAML [--speed-kmh V]
                    [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
     fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
+    fourws tune SPEC.yaml [--workers N] [--check] [--report FILE] [--presets DIR]
     fourws scenarios | fourws controllers
 """
 
@@ -215,6 +216,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return sweep_cli(args.spec, args.out, args.workers, args.scheduler)
 
 
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from .tuning import tune_cli
+
+    return tune_cli(args.spec, args.workers, args.check, args.report, args.presets)
+
+
 def _cmd_list(kind: str) -> int:
     from fourws_sim.core.scenario import list_scenarios
 
@@ -312,6 +319,19 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--scheduler", default=None, help="run on the Dask distributed cluster of "
                    "this scheduler address (e.g. tcp://host:8786) instead of local processes")
     w.set_defaults(func=_cmd_sweep)
+
+    t = sub.add_parser("tune", help="the one tuning procedure of every controller "
+                       "(fourws_bringup.tuning): writes the tuned block of the presets")
+    t.add_argument("spec", help="tuning spec YAML (benchmarks/tuning.yaml)")
+    t.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    t.add_argument("--check", action="store_true", help="write nothing; exit 1 if the "
+                   "presets differ from the procedure's choice")
+    t.add_argument("--report", default=None, help="write every candidate's rho and score "
+                   "(Markdown) here")
+    t.add_argument("--presets", default=None, help="presets folder to write or check "
+                   "(default: the checkout's src/fourws_bringup/config/controllers beside "
+                   "the spec, else the installed presets)")
+    t.set_defaults(func=_cmd_tune)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
         func=lambda a: _cmd_list("scenarios"))

@@ -51,7 +51,7 @@ import numpy as np
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
 from fourws_mpc.core.delay import channel_delays, register_schedule
-from fourws_mpc.core.fuzzy_weights import FuzzyWeights
+from fourws_mpc.core.fuzzy_weights import mamdani
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
@@ -151,7 +151,7 @@ def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
     no = C.shape[0]
     rows = np.array([i * no + j for i in range(n_p) for j in (0, 1)])    # φ, Y of each step
     if cfg.weights_mode == "fuzzy":
-        r = FuzzyWeights(cfg.fuzzy_spec()).ratios(0.0, 0.0)
+        r = mamdani(np.zeros(()), np.zeros(()), cfg.fuzzy_spec())   # the centre rule
         w = (r[1] * cfg.q_phi_max, r[0] * cfg.q_y_max, r[2] * cfg.r_ddelta_max,
              r[3] * cfg.r_dmz_max)
     else:
@@ -179,35 +179,37 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     n_dead = int(round(steer_dead_time_s / dt))
     # the controller's known delays and its buffer of commands sent (register i = u(k−1−i))
     known = channel_delays(cfg.input_delay_periods, cfg.steer_dead_time_s, dt)
-    n_known = max(known) if cfg.law != "lqr_ff" else 0
+    n_known = max(known)
     n_mem = N_INPUT * max(n_known, 1)
     # extended state: plant, command delay registers (3 per period), steer dead-time
     # registers (2 per period), controller memory u(k-1), u(k-2), ... (3 each)
     n_del, n_dead_s = 3 * delay_periods, 2 * n_dead
     n = N_PLANT + n_del + n_dead_s + n_mem
     i_del, i_dead, i_mem = N_PLANT, N_PLANT + n_del, N_PLANT + n_del + n_dead_s
+    # ζ of the controller's prediction model, predicted over its known delay with the
+    # commands it sent (as delay.predict_over_delay); both laws read it
+    Ak, Bk, _ = model_matrices(cfg, vx)
+    n_model = Ak.shape[0]
+    Zs = _zeta(n_model, n)
+    ch = np.arange(N_INPUT)
+    for regs in (register_schedule(known) if n_known else ()):
+        U = np.zeros((N_INPUT, n))
+        U[ch, i_mem + N_INPUT * regs + ch] = 1.0
+        Zs = Ak @ Zs + Bk @ U
     # controller output u(k) = C_u x (3, n)
     C_u = np.zeros((N_INPUT, n))
     if cfg.law == "lqr_ff":
         K = LqrLateral(cfg.model_params(), dt, lqr_weights(cfg)).gain(vx)
-        X = np.zeros((4, n))       # lqr error state from the plant state
-        X[ErrIdx.E1, E1] = 1.0
-        X[ErrIdx.E1_DOT, VY], X[ErrIdx.E1_DOT, E2] = 1.0, vx
-        X[ErrIdx.E2, E2] = 1.0
-        X[ErrIdx.E2_DOT, R] = 1.0
+        X = np.zeros((4, n))       # lqr error state from the (predicted) path-frame state
+        X[ErrIdx.E1] = Zs[StateIdx.Y]
+        X[ErrIdx.E1_DOT] = Zs[StateIdx.VY] + vx * Zs[StateIdx.PHI]
+        X[ErrIdx.E2] = Zs[StateIdx.PHI]
+        X[ErrIdx.E2_DOT] = Zs[StateIdx.R]
         C_u[0] = -(K @ X)[0]
     else:
         K = mpc_gain(cfg, vx)                       # Δu = −K [ζ; u(k−1)]
-        n_model = K.shape[1] - N_INPUT
         Z = np.zeros((n_model + N_INPUT, n))
-        Z[:n_model] = _zeta(n_model, n)
-        if n_known:                                 # ζ predicted over the known delay
-            Ak, Bk, _ = model_matrices(cfg, vx)
-            ch = np.arange(N_INPUT)
-            for regs in register_schedule(known):   # as delay.predict_over_delay
-                U = np.zeros((N_INPUT, n))
-                U[ch, i_mem + N_INPUT * regs + ch] = 1.0
-                Z[:n_model] = Ak @ Z[:n_model] + Bk @ U
+        Z[:n_model] = Zs
         Z[n_model:, i_mem:i_mem + N_INPUT] = np.eye(N_INPUT)
         C_u = Z[n_model:] - K @ Z                  # u = u(k−1) + Δu
         C_u[~cfg.enabled] = 0.0                     # a disabled input is pinned at 0
@@ -262,6 +264,19 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
 def margins(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> Margins:
     """The figures of the module docstring."""
     A_cl, A_o, B_f, K_f = closed_loop(cfg, v, vx, **kw)
+    rho, freq = _dominant_pole(A_cl, cfg.dt_s)
+    gm, pm = _loop_margins(A_o, B_f, K_f, cfg.dt_s)
+    return Margins(rho, freq, rho ** (1.0 / cfg.dt_s), gm, pm, vx)
+
+
+def spectral_radius(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> float:
+    """``margins(...).spectral_radius`` alone (no frequency sweep): for searches."""
+    return _dominant_pole(closed_loop(cfg, v, vx, **kw)[0], cfg.dt_s)[0]
+
+
+def _dominant_pole(A_cl: np.ndarray, dt: float) -> tuple[float, float]:
+    """(ρ, frequency in Hz) of the closed loop's largest pole, the motionless modes left
+    out (below)."""
     eig, vec = np.linalg.eig(A_cl)
     # An MPC with more inputs than outputs that penalises only increments has input
     # directions with no motion (a steady yaw moment held by counter-steer front and rear,
@@ -271,10 +286,7 @@ def margins(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> Margins:
     null = (np.abs(eig - 1.0) < 1e-6) & (motion < 1e-6)   # 1e-6: expm round-off
     eig = eig[~null]
     i = int(np.argmax(np.abs(eig)))
-    rho = float(abs(eig[i]))
-    freq = abs(float(np.angle(eig[i]))) / (2.0 * math.pi * cfg.dt_s)
-    gm, pm = _loop_margins(A_o, B_f, K_f, cfg.dt_s)
-    return Margins(rho, freq, rho ** (1.0 / cfg.dt_s), gm, pm, vx)
+    return float(abs(eig[i])), abs(float(np.angle(eig[i]))) / (2.0 * math.pi * dt)
 
 
 def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float

@@ -115,7 +115,7 @@ class MpcConfig:
     soft_band_phi_deg: float = param(8.0, "soft bound |φ − φ_ref| ≤ band (1 + ε)", lo=1e-6,
                                      hi=180.0, unit="deg")
     # prediction model, eq. (1)
-    prediction_model: str = param("single_track", "prediction model behind the model seam "
+    prediction_model: str = param("single_track_actuators", "prediction model behind the model seam "
                                   "(prediction_model.PREDICTION_MODELS)",
                                   choices=tuple(PREDICTION_MODELS))
     mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
@@ -138,7 +138,7 @@ class MpcConfig:
                         unit="s")
     # beyond assumption (6) (docs/mpc.md, "Actuator-aware prediction", "Delay compensation")
     prediction_discretisation: str = param(
-        "euler", "discretisation of the linearised model: forward Euler (eq. 4) or the exact "
+        "zoh", "discretisation of the linearised model: forward Euler (eq. 4) or the exact "
         "zero-order hold", choices=DISCRETISATIONS)
     steer_front_time_constant_s: float = param(
         0.02, "front steering lag τ_f of the single_track_actuators model", lo=1e-4, hi=10.0,

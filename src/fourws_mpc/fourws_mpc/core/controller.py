@@ -24,7 +24,10 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
    |r| ≤ factor μ g / vx on predicted steps i ≥ ``state_bounds_from_step``, each relaxed to
    the current |vy| or |r| when the car is already beyond it ("no worse than now": a bound
    the state already violates cannot be met within a few steps and would only make the QP
-   infeasible); the paper's weights through the cost scaling (``cost_scaling``);
+   infeasible); when the QP is still infeasible (a lagging steering angle that keeps
+   moving the state after the start), it is solved again without the hard bounds and the
+   status says so (:data:`STATE_BOUNDS_DROPPED`); the paper's weights through the cost
+   scaling (``cost_scaling``);
 7. **result**: u(k) = u(k−1) + Δu*(k), eq. (22), or the fallback; the step's history (with
    the buffer of commands sent) is committed only here.
 
@@ -59,10 +62,12 @@ from fourws_mpc.core.fuzzy_weights import FuzzyWeights
 from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_model
 from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution
-from fourws_mpc.core.qp_solver import QpSettings, QpSolver, make_qp_solver
+from fourws_mpc.core.qp_solver import QpSettings, QpSolver, QpStatus, make_qp_solver
 from fourws_mpc.core.reference import NearestPoint, Reference
 
 G = 9.81
+#: appended to the solver status when the QP was solved without the hard state bounds
+STATE_BOUNDS_DROPPED = "hard state bounds dropped (infeasible with them)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -361,9 +366,21 @@ class MpcController:
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
-        return self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev, pred.ref_out,
-                             hz.n_p, hz.n_c, q_eff, r_eff, c.rho, bounds,
-                             warm_du_scaled=self._warm(hz.n_c))
+        sol = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev, pred.ref_out,
+                            hz.n_p, hz.n_c, q_eff, r_eff, c.rho, bounds,
+                            warm_du_scaled=self._warm(hz.n_c))
+        if sol.ok or sol.code is not QpStatus.PRIMAL_INFEASIBLE or not bounds.state_bounds:
+            return sol
+        # the hard bounds cannot be met from here (the lagging steering still moves the
+        # state after the start): solve without them rather than fall back blind
+        retry = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev,
+                              pred.ref_out, hz.n_p, hz.n_c, q_eff, r_eff, c.rho,
+                              dataclasses.replace(bounds, state_bounds=False),
+                              warm_du_scaled=self._warm(hz.n_c))
+        if retry.ok:
+            retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}"
+            return retry
+        return sol
 
     def _result(self, ref: Reference, err: _Errors, w: _Weights, hz: _Horizons,
                 sol: QpSolution) -> MpcResult:

@@ -1,0 +1,311 @@
+"""``fourws tune SPEC.yaml [--workers N] [--check]``: one written tuning procedure for every
+controller, whose output is the shipped preset YAML (``docs/tuning.md``).
+
+The procedure, the same for every group of controllers (the spec's ``groups``):
+
+1. **Candidates.** Each group names two free parameters (the MPC presets: the common output
+   scaling ``scale_y_m``, ``scale_phi_deg``; ``lqr_ff``: Bryson's maxima ``lqr_e1_max_m``,
+   ``lqr_e2_max_deg``). A candidate multiplies the package defaults (``mpc.yaml``, never a
+   previous result, so a rerun does not drift) by 2^(i/2) and 2^(j/2) for i, j in the spec's
+   ``grid_exponents``: the same grid, so the same budget, for every group.
+2. **Margin.** A candidate is kept only if every controller of the group has a spectral radius
+   ρ ≤ ``max_spectral_radius`` (``core.margins``) at every speed of ``margin.speeds_kmh`` in
+   every world of ``margin.worlds`` (a plant delay and dead time, which the controller is told
+   of: it compensates them). A group with no kept candidate is an error, not a silent default.
+3. **Closed loop.** Every kept candidate of a group runs every controller of the group on every
+   tuning scenario under every tuning condition and seed (the in-process loop of
+   ``fourws sweep``; scenarios and conditions disjoint from the reported ones). A controller's
+   score is its worst max |e_Y| (on the truth) over those runs, infinite if one aborts; the
+   candidate's score is the worst over the group's controllers (one common scaling).
+4. **Choice.** The lowest score; ties go to the lower worst ρ, then to the grid order. The
+   chosen values are written into each preset of the group between the markers
+   :data:`BEGIN` and :data:`END` of its ``mpc_node`` section; ``--check`` writes nothing and
+   fails if the shipped presets differ from what the procedure chooses.
+
+Everything is deterministic (seeded noise, a fixed job order), so a rerun reproduces the
+shipped YAML; the report (``--report``) lists every candidate's ρ and score.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fourws_common.params import read_yaml_file
+from fourws_mpc.core.config import MpcConfig
+
+from .core.conditions import condition_from_mapping
+from .core.configs import (
+    controller_preset_path,
+    controllers_dir,
+    load_mpc_config,
+    node_values,
+)
+
+BEGIN = "# -- tuned: fourws tune benchmarks/tuning.yaml writes the lines below; do not edit --"
+END = "# -- end tuned --"
+SPEC_KEYS = {"grid_exponents", "max_spectral_radius", "margin", "scenarios", "seeds",
+             "conditions", "groups"}
+#: digits kept in the written values (a rerun compares equal)
+DIGITS = 4
+
+
+@dataclass(frozen=True)
+class Group:
+    """Controllers that share the tuned parameters."""
+
+    name: str
+    controllers: tuple[str, ...]
+    parameters: tuple[str, str]
+
+
+@dataclass(frozen=True)
+class TuningSpec:
+    """The parsed spec (module docstring)."""
+
+    grid_exponents: tuple[int, ...]
+    max_spectral_radius: float
+    speeds_kmh: tuple[float, ...]
+    margin_scenario: str
+    worlds: Mapping[str, tuple[int, float]]      # name -> (delay periods, dead time s)
+    scenarios: tuple[str, ...]
+    seeds: tuple[int, ...]
+    conditions: Mapping[str, Mapping[str, Any]]
+    groups: tuple[Group, ...]
+
+
+def load_tuning_spec(path: str | Path) -> TuningSpec:
+    """The spec; ``ValueError`` naming what is wrong. Relative ``.yaml`` scenarios are
+    relative to the spec's folder."""
+    path = Path(path)
+    d = read_yaml_file(path)
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{path}: a tuning spec is a mapping of {sorted(SPEC_KEYS)}")
+    missing, unknown = sorted(SPEC_KEYS - set(d)), sorted(set(d) - SPEC_KEYS)
+    if missing or unknown:
+        raise ValueError(f"{path}: missing {missing}, unknown {unknown}")
+    m = d["margin"]
+    worlds = {str(k): (int(v.get("delay_periods", 0)),
+                       float(v.get("steer_dead_time_ms", 0.0)) * 1e-3)
+              for k, v in m["worlds"].items()}
+    known = {f.name for f in dataclasses.fields(MpcConfig)}
+    groups = []
+    for name, g in d["groups"].items():
+        params = tuple(str(p) for p in g["parameters"])
+        if len(params) != 2 or not set(params) <= known:
+            raise ValueError(f"{path}: group {name}: two MPC parameters, got {list(params)}")
+        groups.append(Group(str(name), tuple(str(c) for c in g["controllers"]), params))
+    scen = tuple(str(path.parent / s) if str(s).endswith(".yaml") else str(s)
+                 for s in d["scenarios"])
+    return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
+                      float(d["max_spectral_radius"]),
+                      tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]), worlds,
+                      scen, tuple(int(s) for s in d["seeds"]), dict(d["conditions"]),
+                      tuple(groups))
+
+
+def defaults(group: Group) -> dict[str, float]:
+    """The package defaults (``mpc.yaml``) of the group's parameters."""
+    values = node_values("mpc_node")
+    return {p: float(values[p]) for p in group.parameters}
+
+
+def candidates(spec: TuningSpec, group: Group) -> list[dict[str, float]]:
+    """The grid of step 1, in grid order."""
+    base = defaults(group)
+    p, q = group.parameters
+    return [{p: round(base[p] * 2.0 ** (i / 2.0), _digits(base[p])),
+             q: round(base[q] * 2.0 ** (j / 2.0), _digits(base[q]))}
+            for i in spec.grid_exponents for j in spec.grid_exponents]
+
+
+def _digits(x: float) -> int:
+    """Decimals that keep :data:`DIGITS` significant digits of ``x``."""
+    return max(DIGITS - 1 - int(math.floor(math.log10(abs(x)))), 0) if x else DIGITS
+
+
+def worst_radius(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> float:
+    """Step 2: the largest ρ over the group's controllers, speeds and worlds."""
+    from fourws_sim.core.scenario import load_scenario
+
+    from .core.margins import spectral_radius
+
+    vehicle = load_scenario(spec.margin_scenario).vehicle
+    worst = 0.0
+    for c in group.controllers:
+        for n_d, dead in spec.worlds.values():
+            cfg = load_mpc_config(c, {**cand, "input_delay_periods": n_d,
+                                      "steer_dead_time_s": dead})
+            for v in spec.speeds_kmh:
+                worst = max(worst, spectral_radius(cfg, vehicle, v / 3.6, delay_periods=n_d,
+                                                   steer_dead_time_s=dead))
+    return worst
+
+
+def _radius_job(args: tuple[TuningSpec, Group, dict[str, float]]) -> float:
+    return worst_radius(*args)
+
+
+def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> list[Any]:
+    from .sweep import Job
+
+    jobs = []
+    for name, raw in spec.conditions.items():
+        for seed in spec.seeds:
+            cond = condition_from_mapping({**(raw or {}), "name": str(name)}, seed=seed)
+            cond = dataclasses.replace(cond, mpc_overrides={**cond.mpc_overrides, **cand})
+            for c in group.controllers:
+                for s in spec.scenarios:
+                    jobs.append(Job(c, s, cond))
+    return jobs
+
+
+def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
+         ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
+    """(chosen values per group, one report row per candidate): steps 1-4."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .sweep import run_sweep
+
+    chosen: dict[str, dict[str, float]] = {}
+    report: list[dict[str, Any]] = []
+    for group in spec.groups:
+        cands = candidates(spec, group)
+        args = [(spec, group, c) for c in cands]
+        if workers > 1:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                radii = list(pool.map(_radius_job, args))
+        else:
+            radii = [_radius_job(a) for a in args]
+        kept = [(c, r) for c, r in zip(cands, radii, strict=True)
+                if r <= spec.max_spectral_radius]
+        if progress:
+            print(f"[tune] {group.name}: {len(kept)} of {len(cands)} candidates have "
+                  f"rho <= {spec.max_spectral_radius}", file=sys.stderr)
+        if not kept:
+            raise ValueError(f"group {group.name}: no candidate of the grid has a spectral "
+                             f"radius <= {spec.max_spectral_radius}; widen grid_exponents")
+        jobs = [j for c, _ in kept for j in _jobs(spec, group, c)]
+        rows = run_sweep(jobs, workers, progress=progress)
+        per = len(jobs) // len(kept)
+        best: tuple[float, float, int] | None = None
+        for k, (c, r) in enumerate(kept):
+            chunk = rows[k * per:(k + 1) * per]
+            by_ctrl: dict[str, float] = {}
+            for row in chunk:
+                e = (float(row["max_abs_lateral_error_m"]) if row.get("completed")
+                     else math.inf)
+                by_ctrl[row["controller"]] = max(by_ctrl.get(row["controller"], 0.0), e)
+            score = max(by_ctrl.values())
+            report.append({"group": group.name, **c, "worst_rho": round(r, 5),
+                           "score_m": score, **{f"max_ey_{n}": v for n, v in by_ctrl.items()}})
+            key = (score, r, k)
+            if best is None or key < best:
+                best = key
+        chosen[group.name] = kept[best[2]][0]
+    return chosen, report
+
+
+def preset_block(values: Mapping[str, float]) -> list[str]:
+    """The lines between the markers (indented as a ``ros__parameters`` key)."""
+    return [f"    {k}: {v!r}" for k, v in values.items()]
+
+
+def presets_dir(spec_path: str | Path) -> Path:
+    """Where the tuned presets are written: the source tree's
+    ``src/fourws_bringup/config/controllers`` beside the spec's ``benchmarks/`` folder when
+    there is one (a checkout), else the presets the package uses."""
+    src = Path(spec_path).resolve().parent.parent / "src" / "fourws_bringup" / "config" / \
+        "controllers"
+    return src if src.is_dir() else controllers_dir()
+
+
+def write_presets(spec: TuningSpec, chosen: Mapping[str, Mapping[str, float]],
+                  directory: Path, check: bool = False) -> list[str]:
+    """Write (or with ``check`` compare) each preset's tuned block in ``directory``; the
+    presets that differ."""
+    differ = []
+    for group in spec.groups:
+        for c in group.controllers:
+            path = directory / f"{c}.yaml"
+            if not path.is_file():
+                raise ValueError(f"preset {c}: {path} not found")
+            text = path.read_text(encoding="utf-8")
+            new = replace_block(text, preset_block(chosen[group.name]), path)
+            if new != text:
+                differ.append(str(path))
+                if not check:
+                    path.write_text(new, encoding="utf-8")
+    return differ
+
+
+def replace_block(text: str, lines: list[str], where: Any = "preset") -> str:
+    """``text`` with the tuned block replaced by ``lines`` (inserted at the end of the
+    ``mpc_node`` parameters when it has none yet)."""
+    pat = re.compile(rf"^ *{re.escape(BEGIN)}\n(?:.*\n)*? *{re.escape(END)}\n", re.M)
+    block = "    " + BEGIN + "\n" + "".join(f"{ln}\n" for ln in lines) + "    " + END + "\n"
+    if pat.search(text):
+        return pat.sub(lambda _m: block, text, count=1)
+    m = re.search(r"^mpc_node:\n  ros__parameters:\n(?:    .*\n)*", text, re.M)
+    if not m:
+        raise ValueError(f"{where}: no 'mpc_node: ros__parameters:' section")
+    return text[:m.end()] + block + text[m.end():]
+
+
+def report_markdown(spec_path: str, chosen: Mapping[str, Mapping[str, float]],
+                    report: list[dict[str, Any]]) -> str:
+    """Every candidate's worst ρ and score, and the choice."""
+    out = [f"# Tuning ({Path(spec_path).name})", ""]
+    for g, vals in chosen.items():
+        out.append(f"- **{g}**: " + ", ".join(f"{k} = {v:g}" for k, v in vals.items()))
+    out.append("")
+    keys: list[str] = []
+    for r in report:
+        keys += [k for k in r if k not in keys]
+    out.append("| " + " | ".join(keys) + " |")
+    out.append("|" + "---|" * len(keys))
+    for r in report:
+        out.append("| " + " | ".join(_fmt(r.get(k)) for k in keys) + " |")
+    return "\n".join(out) + "\n"
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "abort" if math.isinf(v) else f"{v:.4g}"
+    return "" if v is None else str(v)
+
+
+def tune_cli(spec_path: str, workers: int, check: bool, report_path: str | None,
+             presets: str | None = None) -> int:
+    """``fourws tune``."""
+    try:
+        spec = load_tuning_spec(spec_path)
+        directory = Path(presets) if presets else presets_dir(spec_path)
+        for g in spec.groups:
+            for c in g.controllers:
+                controller_preset_path(c)
+        chosen, report = tune(spec, workers)
+        differ = write_presets(spec, chosen, directory, check=check)
+    except (ValueError, OSError, KeyError) as exc:
+        print(f"fourws tune: {exc}", file=sys.stderr)
+        return 2
+    if report_path:
+        Path(report_path).write_text(report_markdown(spec_path, chosen, report),
+                                     encoding="utf-8")
+    for g, vals in chosen.items():
+        print(f"{g}: " + ", ".join(f"{k}={v!r}" for k, v in vals.items()))
+    if check:
+        if differ:
+            print("fourws tune --check: the shipped presets differ from the procedure's choice: "
+                  + ", ".join(differ), file=sys.stderr)
+            return 1
+        print("fourws tune --check: the shipped presets are what the procedure chooses")
+    else:
+        print(f"wrote {len(differ)} preset(s)" + (": " + ", ".join(differ) if differ else ""))
+    return 0
