@@ -134,9 +134,18 @@ def _start_fails(sup, name: str) -> tuple[int, str]:
 
 
 def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
-    """mpc_fws leaves the road on dlc_60_mu05 (docs/mpc.md): ABORTED, 3."""
+    """The paper's MPC-FWS as first shipped (eq. (1)-(4): no steering lag, forward Euler, the
+    first output scaling; linearly unstable on this plant, ``tests/unit/test_margins.py``)
+    leaves the road on dlc_60_mu05: the run ends ABORTED, exit code 3, not a death."""
+    preset = yaml.safe_load((config_dir("fourws_bringup") / "controllers" / "mpc_fws.yaml")
+                            .read_text(encoding="utf-8"))
+    preset["mpc_node"]["ros__parameters"].update(
+        controller="paper_mpc_fws", prediction_model="single_track",
+        prediction_discretisation="euler", scale_phi_deg=0.30)
+    path = tmp_path / "paper_mpc_fws.yaml"
+    path.write_text(yaml.safe_dump(preset), encoding="utf-8")
     r = subprocess.run(["fourws", "run", "--scenario", "dlc_60_mu05", "--controller",
-                        "mpc_fws", "--out", str(tmp_path / "r"), "--no-plots",
+                        str(path), "--out", str(tmp_path / "r"), "--no-plots",
                         "--compose", "all"], capture_output=True, text=True, timeout=300)
     m = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert r.returncode == ExitCode.ABORTED == m["exit_code"], r.stderr[-2000:]

@@ -1,4 +1,5 @@
-"""Closed loop on the plant core (slow): the paper's ranking and APCHA's horizon behaviour."""
+"""Closed loop on the plant core (slow): the paper's scenarios in both worlds, with their
+lead-out, and APCHA's horizon behaviour."""
 
 from pathlib import Path
 
@@ -7,66 +8,88 @@ import pytest
 import yaml
 
 from fourws_bringup.core.closed_loop import run_closed_loop
+from fourws_bringup.core.conditions import load_condition
 from fourws_common.resources import config_dir
 
-
-def _without_relaxation(tmp_path: Path, name: str) -> str:
-    """The scenario with the plant's tyre relaxation turned off (p_Ty1 = 0)."""
-    sc = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / f"{name}.yaml").read_text(
-        encoding="utf-8"))
-    sc["name"] = f"{name}_no_relaxation"
-    sc["vehicle"] = {**(sc.get("vehicle") or {}), "tyre_relaxation_peak_over_radius": 0.0}
-    path = tmp_path / f"{name}_no_relaxation.yaml"
-    path.write_text(yaml.safe_dump(sc), encoding="utf-8")
-    return str(path)
+ROOT = Path(__file__).resolve().parents[2]
+PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc", "lqr_ff")
+#: the paper scenarios with a 30 s straight lead-out, and where the paper's run ends (X, m)
+BENCH = {"dlc_60_mu05": (ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml", 173.0),
+         "dlc_90_mu06": (ROOT / "benchmarks/scenarios/bench_dlc_90_mu06.yaml", 250.0)}
 
 
-def _order_ok(m: dict, key: str) -> bool:
-    """improved < mpc_4ws < mpc_fws on ``key``, each step beyond 0.5 mm; an aborted run last."""
-    e = {c: (m[c][key] if m[c]["completed"] else np.inf) for c in m}
-    return e["improved"] + 5e-4 < e["mpc_4ws"] and e["mpc_4ws"] + 5e-4 < e["mpc_fws"]
+def _lead_out_rms(log, x_end: float, window_s: float = 5.0) -> np.ndarray:
+    """Yaw-rate RMS (rad/s, the plant's truth) over consecutive windows of the lead-out (X
+    beyond the paper's end of run)."""
+    t, r = log.state["t_s"], log.state["yaw_rate"]
+    t0 = t[np.argmax(log.state["x"] > x_end)]
+    edges = np.arange(t0, t[-1] - window_s + 1e-9, window_s)
+    return np.array([np.sqrt(np.mean(r[(t >= a) & (t < a + window_s)] ** 2)) for a in edges])
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", ["dlc_60_mu05", "dlc_90_mu06"])
-def test_tables_6_7_lateral_ranking_comes_from_the_unmodelled_tyre_lag(scenario, tmp_path):
-    """One cost scaling for all presets (docs/mpc.md). On the plant's tyres, whose lateral
-    force lags the slip angle over the relaxation length (13 ms at 60 km/h), the lateral error
-    ranks as Tables 6-7 (improved < mpc_4ws < mpc_fws on max and RMSE eY) and improved stays
-    within the paper's 0.089 m: the fixed weights' 37x lighter input penalty over-drives the
-    steering against a lag eq. (1) does not contain. The same runs with the lag off tie
-    within 0.5 mm: the separation is the lag's, not the path's."""
-    presets = ("improved", "mpc_4ws", "mpc_fws")
-    m = {c: run_closed_loop(scenario, c).metrics() for c in presets}
-    assert m["improved"]["completed"] and m["mpc_4ws"]["completed"], m
-    assert m["improved"]["max_abs_lateral_error_m"] < 0.089, m["improved"]
-    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):
-        assert _order_ok(m, key), (key, m)
-    assert m["improved"]["max_abs_sideslip_deg"] < m["mpc_4ws"]["max_abs_sideslip_deg"]
-    path = _without_relaxation(tmp_path, scenario)
-    off = {c: run_closed_loop(path, c).metrics() for c in presets}
-    e = [off[c]["max_abs_lateral_error_m"] for c in presets]
-    assert all(off[c]["completed"] for c in presets), off
-    assert max(e) - min(e) < 5e-4, e
+@pytest.mark.parametrize("scenario", sorted(BENCH))
+def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenario):
+    """The paper's setting (truth in, no delay): every preset completes; the presets with
+    rear steer hold the path within a third of the front-steer controllers' max |e_Y| and
+    sideslip (the rear axle steers the sideslip away; front steer alone must yaw the car
+    into the lane) and within the paper's 0.089 m; on the 30 s lead-out the yaw rate dies
+    out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
+    path, x_end = BENCH[scenario]
+    logs = {c: run_closed_loop(str(path), c) for c in PRESETS}
+    m = {c: log.metrics() for c, log in logs.items()}
+    assert all(m[c]["completed"] for c in PRESETS), m
+    front = min(m[c]["max_abs_lateral_error_m"] for c in ("mpc_fws", "lqr_ff"))
+    beta = min(m[c]["max_abs_sideslip_deg"] for c in ("mpc_fws", "lqr_ff"))
+    for c in ("mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc"):
+        assert m[c]["max_abs_lateral_error_m"] < front / 3.0, (c, m[c], front)
+        assert m[c]["max_abs_sideslip_deg"] < beta / 3.0, (c, m[c], beta)
+    assert m["improved"]["max_abs_lateral_error_m"] < 0.089
+    for c, log in logs.items():
+        rms = _lead_out_rms(log, x_end)
+        assert len(rms) >= 5 and rms[-1] < 0.01 * rms[0], (c, rms)
 
 
 @pytest.mark.slow
-def test_table_8_yaw_moment_lowers_lateral_error_and_sideslip_the_allocation_ties():
-    """Table 8 on dlc_60_mu05, the car started on the path: adding the direct yaw moment to
-    AMPC-4WS lowers max and RMSE eY and max sideslip (paper: 171 → 124 mm, 1.51° → 0.86°).
-    Rule-based and load-ratio allocation of that moment tie (paper: 124 → 89 mm): they only
-    differ in the front/rear split of each side, by a few N·m per wheel
-    (tests/integration/test_reference_bags.py measures it on the bags)."""
+def test_table_8_the_yaw_moment_is_used_and_the_allocation_ties():
+    """Table 8 on dlc_60_mu05: the DYC presets command a yaw moment of a few hundred N·m and
+    AMPC-4WS none; with rear steer already holding the path to a millimetre, the moment moves
+    max |e_Y| by less than 1 mm either way (the paper: 171 → 124 mm, a car without the rear
+    axle's authority). Rule-based and load-ratio allocation of that moment tie (e_Y within
+    2 %, sideslip within 0.01°): they only split each side's torque front/rear differently."""
     m, mz = {}, {}
     for c in ("improved", "ampc_4ws_dyc", "ampc_4ws"):
         log = run_closed_loop("dlc_60_mu05", c)
         m[c], mz[c] = log.metrics(), float(np.abs(log.mpc["yaw_moment"]).max())
         assert m[c]["completed"], m[c]
-    assert mz["ampc_4ws"] == 0.0 and 100.0 < mz["improved"] < 500.0, mz
-    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m", "max_abs_sideslip_deg"):
-        for dyc in ("improved", "ampc_4ws_dyc"):
-            assert m[dyc][key] < 0.98 * m["ampc_4ws"][key], (key, m)
-        assert m["improved"][key] == pytest.approx(m["ampc_4ws_dyc"][key], rel=0.01), (key, m)
+    assert mz["ampc_4ws"] == 0.0 and 100.0 < mz["improved"] < 1500.0, mz
+    e = {c: m[c]["max_abs_lateral_error_m"] for c in m}
+    assert abs(e["improved"] - e["ampc_4ws"]) < 1e-3, e
+    for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):
+        assert m["improved"][key] == pytest.approx(m["ampc_4ws_dyc"][key], rel=0.02), (key, m)
+    assert m["improved"]["max_abs_sideslip_deg"] == pytest.approx(          # hundredths of a
+        m["ampc_4ws_dyc"]["max_abs_sideslip_deg"], abs=0.01)                 # degree
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario, seed", [("dlc_60_mu05", 0), ("dlc_90_mu06", 1)])
+def test_realistic_world_every_preset_completes_and_the_lead_out_does_not_grow(scenario, seed):
+    """Under the bench's "all" (localisation and IMU noise, 1 period of delay, 40 ms of
+    steering dead time, estimated tyre forces; the delays known to the controllers): every
+    preset completes the paper scenario and its lead-out. The noise keeps exciting the loop,
+    so the yaw rate settles to a noise-driven level instead of zero: a slowly growing
+    oscillation would raise it, so the RMS of the last 10 s may not exceed 1.25 × the RMS
+    of the 10 s before."""
+    path, x_end = BENCH[scenario]
+    cond = load_condition(str(ROOT / "benchmarks/robustness.yaml#all"), seed=seed)
+    assert cond.known_delays and cond.delay_periods == 1
+    for c in PRESETS:
+        log = run_closed_loop(str(path), c, condition=cond)
+        m = log.metrics()
+        assert m["completed"], (c, m)
+        rms = _lead_out_rms(log, x_end)
+        late, before = np.sqrt(np.mean(rms[-2:] ** 2)), np.sqrt(np.mean(rms[-4:-2] ** 2))
+        assert late <= 1.25 * before, (c, rms)
 
 
 @pytest.mark.slow

@@ -260,19 +260,20 @@ def replace_block(text: str, lines: list[str], where: Any = "preset") -> str:
 
 def report_markdown(spec_path: str, chosen: Mapping[str, Mapping[str, float]],
                     report: list[dict[str, Any]]) -> str:
-    """Every candidate's worst ρ and score, and the choice."""
+    """Per group: the choice, then every kept candidate's worst ρ and scores (m)."""
     out = [f"# Tuning ({Path(spec_path).name})", ""]
     for g, vals in chosen.items():
-        out.append(f"- **{g}**: " + ", ".join(f"{k} = {v:g}" for k, v in vals.items()))
-    out.append("")
-    keys: list[str] = []
-    for r in report:
-        keys += [k for k in r if k not in keys]
-    out.append("| " + " | ".join(keys) + " |")
-    out.append("|" + "---|" * len(keys))
-    for r in report:
-        out.append("| " + " | ".join(_fmt(r.get(k)) for k in keys) + " |")
-    return "\n".join(out) + "\n"
+        out += [f"## {g}: " + ", ".join(f"{k} = {v:g}" for k, v in vals.items()), ""]
+        rows = [r for r in report if r["group"] == g]
+        keys: list[str] = []
+        for r in rows:
+            keys += [k for k in r if k not in keys and k != "group"]
+        out.append("| " + " | ".join(keys) + " |")
+        out.append("|" + "---|" * len(keys))
+        for r in rows:
+            out.append("| " + " | ".join(_fmt(r.get(k)) for k in keys) + " |")
+        out.append("")
+    return "\n".join(out)
 
 
 def _fmt(v: Any) -> str:

@@ -115,8 +115,8 @@ class MpcConfig:
     soft_band_phi_deg: float = param(8.0, "soft bound |φ − φ_ref| ≤ band (1 + ε)", lo=1e-6,
                                      hi=180.0, unit="deg")
     # prediction model, eq. (1)
-    prediction_model: str = param("single_track_actuators", "prediction model behind the model seam "
-                                  "(prediction_model.PREDICTION_MODELS)",
+    prediction_model: str = param("single_track_actuators", "prediction model behind the "
+                                  "model seam (prediction_model.PREDICTION_MODELS)",
                                   choices=tuple(PREDICTION_MODELS))
     mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
     yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", lo=1.0, hi=1e6, unit="kg*m^2")

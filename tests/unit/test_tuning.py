@@ -1,0 +1,91 @@
+"""fourws tune: the one tuning procedure, its spec, its preset blocks, and that rerunning it
+reproduces the shipped presets."""
+
+from pathlib import Path
+
+import pytest
+
+from fourws_bringup import tuning
+from fourws_bringup.core.configs import load_mpc_config, node_values
+
+ROOT = Path(__file__).resolve().parents[2]
+SPEC = ROOT / "benchmarks" / "tuning.yaml"
+
+
+def test_the_spec_is_disjoint_from_what_is_reported():
+    """Nothing tuned on the paper's scenarios or the bench's: other scenarios, other seeds."""
+    from fourws_bringup.sweep import load_spec
+
+    spec = tuning.load_tuning_spec(SPEC)
+    bench = load_spec(ROOT / "benchmarks" / "robustness.yaml")
+    reported = {Path(j.scenario).stem for j in bench} | {"dlc_60_mu05", "dlc_90_mu06"}
+    assert not {Path(s).stem for s in spec.scenarios} & reported
+    assert not set(spec.seeds) & {j.condition.seed for j in bench}
+    members = [c for g in spec.groups for c in g.controllers]
+    from fourws_bringup.core.configs import list_controllers
+
+    assert sorted(members) == list_controllers()           # every preset, once
+    assert len({g.parameters for g in spec.groups}) == len(spec.groups)
+
+
+def test_candidates_start_from_the_package_defaults_on_one_grid_for_every_group():
+    spec = tuning.load_tuning_spec(SPEC)
+    sizes = {len(tuning.candidates(spec, g)) for g in spec.groups}
+    assert sizes == {len(spec.grid_exponents) ** 2}          # the same budget
+    for g in spec.groups:
+        base = {p: float(node_values("mpc_node")[p]) for p in g.parameters}
+        assert base in tuning.candidates(spec, g)             # exponent 0 is the default
+
+
+def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
+    bad = tmp_path / "t.yaml"
+    bad.write_text(SPEC.read_text(encoding="utf-8").replace("seeds:", "seedz:"),
+                   encoding="utf-8")
+    with pytest.raises(ValueError, match="seeds"):
+        tuning.load_tuning_spec(bad)
+    bad.write_text(SPEC.read_text(encoding="utf-8").replace(
+        "[scale_y_m, scale_phi_deg]", "[scale_y_m, no_such_parameter]"), encoding="utf-8")
+    with pytest.raises(ValueError, match="no_such_parameter"):
+        tuning.load_tuning_spec(bad)
+
+
+def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
+    text = ("# a preset\nmpc_node:\n  ros__parameters:\n    controller: x\n"
+            "allocator_node:\n  ros__parameters:\n    method: equal\n")
+    once = tuning.replace_block(text, ["    scale_y_m: 0.01"])
+    assert once.count(tuning.BEGIN) == 1 and "    scale_y_m: 0.01\n" in once
+    assert once.index(tuning.END) < once.index("allocator_node")
+    twice = tuning.replace_block(once, ["    scale_y_m: 0.02"])
+    assert twice == once.replace("0.01", "0.02")
+    with pytest.raises(ValueError, match="mpc_node"):
+        tuning.replace_block("allocator_node: {}\n", [])
+
+
+def test_the_shipped_presets_carry_the_chosen_values_and_satisfy_the_margin():
+    """What the presets load is what their tuned block says, and the chosen candidate meets
+    the procedure's own constraint (the full rerun is the next test)."""
+    spec = tuning.load_tuning_spec(SPEC)
+    for g in spec.groups:
+        vals = {}
+        for c in g.controllers:
+            cfg = load_mpc_config(c)
+            vals[c] = tuple(getattr(cfg, p) for p in g.parameters)
+        assert len(set(vals.values())) == 1, vals            # one common value per group
+        chosen = dict(zip(g.parameters, next(iter(vals.values())), strict=True))
+        assert chosen in tuning.candidates(spec, g)
+        assert tuning.worst_radius(spec, g, chosen) <= spec.max_spectral_radius
+
+
+@pytest.mark.slow
+def test_rerunning_the_tuning_command_reproduces_the_shipped_presets(tmp_path, capsys):
+    """``fourws tune benchmarks/tuning.yaml --check``: the whole procedure (margins, every
+    kept candidate's closed-loop runs) chooses exactly what the presets hold."""
+    from fourws_bringup.cli import main
+
+    report = tmp_path / "tuning.md"
+    rc = main(["tune", str(SPEC), "--workers", "2", "--check", "--report", str(report)])
+    out = capsys.readouterr()
+    assert rc == 0, out.err + out.out
+    assert "the shipped presets are what the procedure chooses" in out.out
+    text = report.read_text(encoding="utf-8")
+    assert "## mpc:" in text and "## lqr_ff:" in text
