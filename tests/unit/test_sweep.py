@@ -113,7 +113,7 @@ def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
     assert len(jobs) == 140 and len({j.key for j in jobs}) == 140
     by = {j.condition.name: j.condition for j in jobs}
     assert by["relaxation_x0"].vehicle_overrides == {"tyre_relaxation_peak_over_radius": 0}
-    assert by["scaling_k1"].mpc_overrides == {"scale_y_m": 0.0059, "scale_phi_deg": 0.3}
+    assert by["scaling_k1"].mpc_overrides == {"scale_y_m": 0.0059, "scale_phi_deg": 0.075}
     # k = 1 is the shipped scaling: the same run as no override
     a = run("dlc_60_mu05", "improved", 150, condition=by["scaling_k1"])
     b = run("dlc_60_mu05", "improved", 150)

@@ -24,9 +24,10 @@ Spec (YAML)::
 Each run is the same core loop as ``run_closed_loop`` (the graph reproduces it); a run that
 raises is a row with ``completed`` false and its reason, never a lost run. ``results.csv``
 has ``controller, scenario, condition, seed``, every metric key, ``completed``, ``reason``,
-the N_p/N_c ranges and the range of each weight; ``summary.md`` the median and worst over
-seeds of max |e_Y|, the aborted count, and each controller's margins (``core.margins``) under
-the condition's delay and dead time.
+the N_p/N_c ranges, the range of each weight and the activity figures of :func:`activity`;
+``summary.md`` the median and worst over seeds of max |e_Y|, the aborted count, the median
+activity figures, and each controller's margins (``core.margins``) under the condition's
+delay and dead time.
 """
 
 from __future__ import annotations
@@ -121,6 +122,7 @@ def run_job(job: Job) -> dict[str, Any]:
         m.pop("controller", None)
         row.update(m)
         row["steps"] = log.steps
+        row.update(activity(log))
         for key in ("np", "nc"):
             v = log.mpc[key]
             row[f"{key}_min"], row[f"{key}_max"] = (int(v.min()), int(v.max())) if len(v) else \
@@ -134,6 +136,26 @@ def run_job(job: Job) -> dict[str, Any]:
         row["reason"] = f"raised {type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+#: seconds at the end of a run over which :func:`activity` measures the settled yaw rate (the
+#: bench scenarios end with a 30 s straight lead-out)
+TAIL_S = 10.0
+
+
+def activity(log: Any) -> dict[str, float]:
+    """What max |e_Y| does not show: ``yaw_rate_rms_tail_deg_s``, the RMS of the true yaw
+    rate over the last :data:`TAIL_S` s (on a lead-out straight: what is left of the
+    manoeuvre plus what the sensor noise keeps exciting), and ``steer_rate_rms_deg_s``, the
+    RMS of the front steer command's rate over the run (the control activity)."""
+    t, r = log.state["t_s"], log.state["yaw_rate"]
+    tail = t >= t[-1] - TAIL_S if len(t) else np.zeros(0, bool)
+    d = np.diff(np.asarray(log.mpc["delta_front"], float))
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
+    return {"yaw_rate_rms_tail_deg_s": math.degrees(float(np.sqrt(np.mean(r[tail] ** 2))))
+            if tail.any() else math.nan,
+            "steer_rate_rms_deg_s": math.degrees(float(np.sqrt(np.mean(d ** 2))) / dt)
+            if len(d) else math.nan}
 
 
 def run_sweep(jobs: list[Job], workers: int = 1, progress: bool = True,
@@ -199,6 +221,11 @@ def _cell(v: Any) -> Any:
     return v
 
 
+def _median(rows: list[dict[str, Any]], key: str) -> str:
+    v = [r[key] for r in rows if isinstance(r.get(key), float) and math.isfinite(r[key])]
+    return f"{float(np.median(v)):.3f}" if v else "—"
+
+
 def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
     """Median and worst max |e_Y| over seeds, aborted runs, margins, per cell."""
     from fourws_sim.core.scenario import load_scenario
@@ -212,7 +239,8 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
         cells.setdefault((job.scenario, job.condition.name, job.controller), []).append(r)
         conds[job.condition.name] = job.condition
     lines = ["| scenario | condition | controller | runs | aborted | median max|eY| m | "
-             "worst max|eY| m | ρ | PM deg |", "|---|---|---|---|---|---|---|---|---|"]
+             "worst max|eY| m | median yaw-rate RMS, last 10 s, deg/s | median steer-rate "
+             "RMS deg/s | ρ | PM deg |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for (sc, cond, c), rs in cells.items():
         e = [r["max_abs_lateral_error_m"] for r in rs
              if isinstance(r.get("max_abs_lateral_error_m"), float)]
@@ -229,8 +257,9 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
             rho, pm = f"error: {exc}", ""
         med = f"{float(np.median(e)):.4f}" if e else "—"
         worst = f"{max(e):.4f}" if e else "—"
+        act = [_median(rs, k) for k in ("yaw_rate_rms_tail_deg_s", "steer_rate_rms_deg_s")]
         lines.append(f"| {sc} | {cond} | {c} | {len(rs)} | {aborted} | {med} | {worst} | "
-                     f"{rho} | {pm} |")
+                     f"{act[0]} | {act[1]} | {rho} | {pm} |")
     return "\n".join(lines) + "\n"
 
 
