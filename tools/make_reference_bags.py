@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from fourws_bringup.bag.run_data import read_run
-from fourws_bringup.paper import PAPER_RUNS
+from fourws_bringup.paper import PAPER_RUNS, WORLDS, run_dir_name
 from fourws_bringup.scoring import bag_metrics
 
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
@@ -27,8 +27,8 @@ KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m"
 def main(src: str) -> int:
     root = Path(__file__).resolve().parents[1] / "bags"
     rows = []
-    for ctrl, scen in PAPER_RUNS:
-        name = f"{ctrl}@{scen}"
+    for ctrl, scen, world in [(c, s, w) for w in WORLDS for c, s in PAPER_RUNS]:
+        name = run_dir_name(ctrl, scen, world)
         dst = root / name
         if dst.exists():
             shutil.rmtree(dst)
@@ -41,7 +41,9 @@ def main(src: str) -> int:
                     + " | ".join(f"{m[k]:.6f}" for k in KEYS)
                     + f" | {status.get('completed')} | {size:.2f} |")
     head = ["# Reference runs", "",
-            "The eight configurations of `fourws paper` (Tables 6-8), recorded over topics in "
+            "The eight configurations of `fourws paper` (Tables 6-8) in both worlds (ideal: "
+            "`CONTROLLER@SCENARIO`; realistic, noise seed 0: `CONTROLLER@SCENARIO@realistic`, "
+            "scored on the recorded `/vehicle/ground_truth`), recorded over topics in "
             "lockstep: rosbag2 layout (`metadata.yaml` + one zstd-chunked `.mcap`, profile "
             "ros2, ros2msg schemas, cdr). Regenerate with:", "",
             "```bash", "source ros_ws/env.sh",

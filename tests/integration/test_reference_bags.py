@@ -14,11 +14,12 @@ import pytest
 
 from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.core.configs import load_allocator_config
-from fourws_bringup.paper import PAPER_RUNS, allocation_note
+from fourws_bringup.paper import PAPER_RUNS, WORLDS, allocation_note, run_dir_name
 from fourws_bringup.report import allocation_audit
 from fourws_bringup.scoring import bag_metrics
 
 BAGS = Path(__file__).resolve().parents[2] / "bags"
+NAMES = [run_dir_name(c, s, w) for w in WORLDS for c, s in PAPER_RUNS]
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
         "max_abs_heading_error_deg", "rmse_heading_error_deg", "max_abs_sideslip_deg",
         "rmse_sideslip_deg")
@@ -36,15 +37,14 @@ def readme_rows() -> dict[str, dict[str, float]]:
 
 def test_every_paper_configuration_has_a_bag_under_5_mb():
     rows = readme_rows()
-    for ctrl, scen in PAPER_RUNS:
-        name = f"{ctrl}@{scen}"
+    for name in NAMES:
         assert name in rows, f"{name} missing from bags/README.md"
         files = list((BAGS / name).glob("*.mcap"))
         assert len(files) == 1 and (BAGS / name / "metadata.yaml").is_file(), name
         assert files[0].stat().st_size < 5 * 1024 * 1024, name
 
 
-@pytest.mark.parametrize("name", [f"{c}@{s}" for c, s in PAPER_RUNS])
+@pytest.mark.parametrize("name", NAMES)
 def test_bag_metrics_equal_the_readme(name):
     want = readme_rows()[name]
     m = bag_metrics(read_run(BAGS / name))

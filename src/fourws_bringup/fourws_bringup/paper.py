@@ -4,6 +4,13 @@ Only the paper's side: its printed tables (Tables 6-8), the eight configurations
 of each table beside the paper's, the allocation note and ``fourws paper``. Every number is
 computed from a recorded bag by ``scoring.score_run`` (the same code ``fourws run`` and
 ``fourws report`` use), so any table can be regenerated from the bags alone.
+
+Two worlds (:data:`WORLDS`): **ideal**, the paper's setting (the controllers see the truth,
+commands act at once, tyre forces known), and **realistic**, the shipped condition
+``config/conditions/realistic.yaml`` (localisation and IMU noise, one period of computation
+delay, 40 ms of steering dead time, estimated tyre forces; the delays known to the
+controllers), one noise seed (``--seed``). The bench (``docs/benchmark.md``) gives the
+median and worst over five seeds.
 """
 
 from __future__ import annotations
@@ -48,13 +55,26 @@ TABLES = (
 PAPER_RUNS = [(c, "dlc_60_mu05") for c in ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
                                               "ampc_4ws_dyc")] + \
              [(c, "dlc_90_mu06") for c in ("mpc_fws", "mpc_4ws", "improved")]
+#: world -> the shipped condition it runs under (None: ideal)
+WORLDS = {"ideal": None, "realistic": "realistic"}
 # Completed runs whose max |eY| differ by less than this fraction of the larger one tie: the
 # lockstep runs are deterministic, but an order decided by under 1 % is not a finding.
 TIE_REL = 0.01
 
 
-def run_dir_name(controller: str, scenario: str) -> str:
-    return f"{controller}@{Path(scenario).stem}"
+def run_dir_name(controller: str, scenario: str, world: str = "ideal") -> str:
+    """``CONTROLLER@SCENARIO`` (ideal) or ``CONTROLLER@SCENARIO@WORLD``."""
+    base = f"{controller}@{Path(scenario).stem}"
+    return base if world == "ideal" else f"{base}@{world}"
+
+
+def _world_condition(world: str, seed: int = 0):
+    from .core.conditions import IDEAL, load_condition
+
+    if world not in WORLDS:
+        raise ValueError(f"world '{world}': not one of {sorted(WORLDS)}")
+    name = WORLDS[world]
+    return IDEAL if name is None else load_condition(name, seed)
 
 
 def _fmt(v) -> str:
@@ -94,11 +114,11 @@ def consistent(groups: list[list[str]], order: list[str]) -> bool:
     return -1 not in idx and idx == sorted(idx)
 
 
-def format_tables(results: dict[tuple[str, str], dict]) -> str:
-    """The three tables, ours beside the paper's, as Markdown."""
+def format_tables(results: dict[tuple[str, str], dict], world: str = "ideal") -> str:
+    """The three tables of one world, ours beside the paper's, as Markdown."""
     lines = []
     for title, scenario, paper, keys, heads in TABLES:
-        lines += [f"### {title}", "",
+        lines += [f"### {title} ({world})", "",
                   "| controller | source | " + " | ".join(heads) + " |",
                   "|---|---|" + "---|" * len(heads)]
         for ctrl, ref in paper.items():
@@ -120,27 +140,34 @@ def format_tables(results: dict[tuple[str, str], dict]) -> str:
         lines += ["", f"Ranking on max |eY| (best first): fourws {ours_text}; "
                       f"paper {' < '.join(paper_order)} ({verdict})", ""]
         if keys is T67_KEYS:
-            lines += [margins_line(scenario, list(paper)), ""]
+            lines += [margins_line(scenario, list(paper), world), ""]
     return "\n".join(lines)
 
 
-def margins_line(scenario: str, controllers: list[str]) -> str:
+def margins_line(scenario: str, controllers: list[str], world: str = "ideal") -> str:
     """One line of ``fourws margins`` figures per controller on the scenario's vehicle and
-    speed (the linearised loop: spectral radius per period, > 1 unstable; dominant pole's
-    frequency; phase margin of the steering loop)."""
+    speed in ``world`` (its delay and dead time, and what the controllers are told of them):
+    the linearised loop's spectral radius per period (> 1 unstable), the dominant pole's
+    frequency, the gain and phase margins of the steering loop."""
     from fourws_sim.core.scenario import load_scenario
 
+    from .core.conditions import node_parameters
     from .core.configs import load_mpc_config
     from .core.margins import margins
 
     sc = load_scenario(scenario)
+    cond = _world_condition(world)
     parts = []
     for c in controllers:
-        m = margins(load_mpc_config(c), sc.vehicle, sc.speed_mps)
+        m = margins(load_mpc_config(c, node_parameters(cond)["mpc_node"]), sc.vehicle,
+                    sc.speed_mps, delay_periods=cond.delay_periods,
+                    steer_dead_time_s=cond.steer_dead_time_s)
         pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
-        parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, PM {pm})")
-    return (f"Linearised loop at {sc.speed_mps * 3.6:.0f} km/h (`fourws margins`, ρ > 1 "
-            f"grows): " + "; ".join(parts))
+        gm = "n/a" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
+        parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, GM {gm}, "
+                     f"PM {pm})")
+    return (f"Linearised loop at {sc.speed_mps * 3.6:.0f} km/h, {world} (`fourws margins`, "
+            f"ρ > 1 grows): " + "; ".join(parts))
 
 
 def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
@@ -173,27 +200,31 @@ def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
 
 
 def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
-              compose: str = "none") -> int:
-    """``fourws paper``: the eight runs, the tables beside the paper's, report.md.
+              compose: str = "none", worlds: tuple[str, ...] = tuple(WORLDS),
+              seed: int = 0) -> int:
+    """``fourws paper``: the eight runs in each world, the tables beside the paper's,
+    report.md.
 
     ``force`` lets an existing output of ``fourws paper`` (:func:`paper_folder_problem`) be
     written over: each run's folder is replaced, report.md and figures/ rewritten, other run
-    folders kept. Any other non-empty folder is refused.
+    folders kept. Any other non-empty folder is refused. ``seed``: the realistic world's
+    noise seed.
     """
+    conds = {w: _world_condition(w, seed) for w in worlds}
     prepare_out_dir(out, force, problem=paper_folder_problem, replace=False,
                     what="fourws paper output (" + ", ".join(PAPER_FOLDER_ENTRIES)
-                    + ", CONTROLLER@SCENARIO/ run folders)")
-    runs = PAPER_RUNS
+                    + ", CONTROLLER@SCENARIO[@WORLD]/ run folders)")
+    runs = [(c, s, w) for w in worlds for c, s in PAPER_RUNS]
     if only:
         runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
-    results: dict[tuple[str, str], dict] = {}
+    results: dict[str, dict[tuple[str, str], dict]] = {w: {} for w in worlds}
     t_start = time.monotonic()
-    for i, (ctrl, scen) in enumerate(runs):
+    for i, (ctrl, scen, world) in enumerate(runs):
         bar = "#" * i + "." * (len(runs) - i)
-        print(f"[{bar}] run {i + 1}/{len(runs)}: {ctrl} on {scen}", file=sys.stderr)
-        m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen), force=True,
-                          compose=compose)
-        results[(ctrl, scen)] = m
+        print(f"[{bar}] run {i + 1}/{len(runs)}: {ctrl} on {scen}, {world}", file=sys.stderr)
+        m = run_and_score(scen, ctrl, out / run_dir_name(ctrl, scen, world), force=True,
+                          compose=compose, condition=conds[world])
+        results[world][(ctrl, scen)] = m
         step_ms = (m.get("step_latency_ms") or {}).get("step", {}).get("p50", float("nan"))
         print(f"    max|eY| {m.get('max_abs_lateral_error_m', float('nan')):.4f} m, "
               f"RTF {m.get('real_time_factor') or float('nan'):.2f} "
@@ -201,17 +232,26 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
               f"{'completed' if m.get('completed') else 'NOT completed: ' + m.get('reason', '')}",
               file=sys.stderr)
     wall = time.monotonic() - t_start
-    tables = format_tables(results)
-    note = allocation_note(out, results)
-    if note:
-        tables += "\n" + note + "\n"
+    parts = []
+    for w in worlds:
+        head = ("## Ideal world: the paper's setting (truth in, no delay, tyre forces known)"
+                if w == "ideal" else
+                f"## Realistic world: `{WORLDS[w]}` condition, noise seed {seed} (median and "
+                "worst of five seeds: docs/benchmark.md)")
+        parts += [head, "", format_tables(results[w], w)]
+        note = allocation_note(out, results[w]) if w == "ideal" else ""
+        if note:
+            parts += [note, ""]
+    tables = "\n".join(parts)
     print(tables)
     print(f"\n{len(runs)} runs in {wall:.0f} s of wall time")
     from .report_md import write_report
 
-    write_report(out, results, tables, wall)
+    flat = {(c, s if w == "ideal" else f"{s}@{w}"): m
+            for w, res in results.items() for (c, s), m in res.items()}
+    write_report(out, flat, tables, wall)
     print(f"report: {out / 'report.md'}")
-    failed = {f"{c}@{s}": why for (c, s), m in results.items() if (why := run_failure(m))}
+    failed = {f"{c}@{s}": why for (c, s), m in flat.items() if (why := run_failure(m))}
     for name, why in failed.items():
         print(f"fourws paper: {name} failed: {why}", file=sys.stderr)
     return 1 if failed else 0

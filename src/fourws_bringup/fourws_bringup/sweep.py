@@ -20,6 +20,7 @@ Spec (YAML)::
       ideal: {}
       noise: {noise: {y: {sigma: 0.02, tau_s: 1.0}}}
       all: {noise: {...}, delay_periods: 1, steer_dead_time_ms: 40, tyre_forces: estimated}
+      realistic: realistic                   # a shipped condition, by name
 
 Each run is the same core loop as ``run_closed_loop`` (the graph reproduces it); a run that
 raises is a row with ``completed`` false and its reason, never a lost run. ``results.csv``
@@ -46,7 +47,12 @@ import numpy as np
 
 from fourws_common.params import read_yaml_file
 
-from .core.conditions import Condition, condition_from_mapping, node_parameters
+from .core.conditions import (
+    Condition,
+    condition_from_mapping,
+    condition_mapping,
+    node_parameters,
+)
 
 SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
 GROUP_KEYS = {"controllers", "scenarios", "conditions"}
@@ -100,10 +106,11 @@ def load_spec(path: str | Path) -> list[Job]:
 def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> list[Job]:
     jobs = []
     for name, raw in conditions.items():
-        base = condition_from_mapping({**(raw or {}), "name": str(name)})
+        raw = condition_mapping(raw)
+        base = condition_from_mapping({**raw, "name": str(name)})
         noisy = any(s.sigma > 0.0 for s in base.noise.values())
         for seed in (seeds if noisy else seeds[:1]):
-            cond = condition_from_mapping({**(raw or {}), "name": str(name)}, seed=seed)
+            cond = condition_from_mapping({**raw, "name": str(name)}, seed=seed)
             for c in controllers:
                 for s in scenarios:
                     jobs.append(Job(str(c), str(s), cond))

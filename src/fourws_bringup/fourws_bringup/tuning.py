@@ -40,7 +40,7 @@ from typing import Any
 from fourws_common.params import read_yaml_file
 from fourws_mpc.core.config import MpcConfig
 
-from .core.conditions import condition_from_mapping
+from .core.conditions import condition_from_mapping, condition_mapping
 from .core.configs import (
     controller_preset_path,
     controllers_dir,
@@ -158,7 +158,8 @@ def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> list[Any
     jobs = []
     for name, raw in spec.conditions.items():
         for seed in spec.seeds:
-            cond = condition_from_mapping({**(raw or {}), "name": str(name)}, seed=seed)
+            cond = condition_from_mapping({**condition_mapping(raw), "name": str(name)},
+                                          seed=seed)
             cond = dataclasses.replace(cond, mpc_overrides={**cond.mpc_overrides, **cand})
             for c in group.controllers:
                 for s in spec.scenarios:

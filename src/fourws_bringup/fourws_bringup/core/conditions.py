@@ -94,12 +94,44 @@ def _flag(v: Any, name: str) -> bool:
     return v
 
 
+def packaged_conditions() -> list[str]:
+    """Names of the conditions shipped in ``fourws_bringup/config/conditions``."""
+    return sorted(p.stem for p in _conditions_dir().glob("*.yaml"))
+
+
+def _conditions_dir() -> Path:
+    from fourws_common.resources import config_dir
+
+    return config_dir("fourws_bringup") / "conditions"
+
+
+def condition_mapping(raw: Any) -> dict[str, Any]:
+    """A condition's mapping from a spec entry: the mapping itself (``None`` is ideal), or
+    the name of a shipped condition (``realistic``: ``config/conditions/realistic.yaml``),
+    so a spec and ``fourws paper`` share one definition."""
+    if raw is None:
+        return {}
+    if isinstance(raw, str):
+        path = _conditions_dir() / f"{raw}.yaml"
+        if not path.is_file():
+            raise ValueError(f"condition '{raw}': no such shipped condition (shipped: "
+                             f"{', '.join(packaged_conditions())})")
+        raw = read_yaml_file(path)
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"condition: a mapping of {sorted(_KEYS)} or a shipped condition's "
+                         f"name, got {raw!r}")
+    return dict(raw)
+
+
 def load_condition(arg: str, seed: int | None = None) -> Condition:
-    """The condition named by ``arg``: ``FILE.yaml`` holding one condition mapping, or
-    ``SPEC.yaml#NAME``, the condition NAME of a sweep spec (its top-level ``conditions`` or
-    any group's); ``seed`` overrides the condition's own. ``ValueError`` names what is wrong.
+    """The condition named by ``arg``: a shipped condition's name (``realistic``),
+    ``FILE.yaml`` holding one condition mapping, or ``SPEC.yaml#NAME``, the condition NAME of
+    a sweep spec (its top-level ``conditions`` or any group's); ``seed`` overrides the
+    condition's own. ``ValueError`` names what is wrong.
     """
     path, _, name = arg.partition("#")
+    if not name and not path.endswith((".yaml", ".yml")) and path in packaged_conditions():
+        return condition_from_mapping({**condition_mapping(path), "name": path}, seed)
     data = read_yaml_file(path)
     if name:
         groups = [data] + list(data.get("groups") or []) if isinstance(data, Mapping) else []
@@ -108,7 +140,7 @@ def load_condition(arg: str, seed: int | None = None) -> Condition:
                  and name in g["conditions"]]
         if not found:
             raise ValueError(f"{path}: no condition '{name}' among its conditions")
-        data = {**(found[0] or {}), "name": name}
+        data = {**condition_mapping(found[0]), "name": name}
     elif not isinstance(data, Mapping):
         raise ValueError(f"{path}: a condition file is a mapping of {sorted(_KEYS)}")
     else:
