@@ -86,3 +86,25 @@ def test_vehicle_overrides_change_the_plant_not_the_controller():
     assert not np.array_equal(a.state["steer_front"], b.state["steer_front"])
     with pytest.raises(ValueError, match="wings"):
         _run(condition_from_mapping({"vehicle_overrides": {"wings": 2}}))
+
+
+def test_the_shipped_realistic_condition_is_named_once_and_shared():
+    """``realistic`` (config/conditions/realistic.yaml) is what fourws paper, the bench's
+    "all" and the tuning spec's "all" run: one definition, the delays known."""
+    from pathlib import Path
+
+    from fourws_bringup.core.conditions import load_condition, packaged_conditions
+
+    root = Path(__file__).resolve().parents[2] / "benchmarks"
+    shipped = load_condition("realistic", seed=2)
+    assert "realistic" in packaged_conditions()
+    for spec in ("robustness.yaml#all", "tuning.yaml#all"):
+        assert dataclasses.replace(load_condition(str(root / spec), seed=2),
+                                   name="realistic") == shipped, spec
+    assert shipped.known_delays and shipped.delay_periods == 1
+    assert shipped.steer_dead_time_s == pytest.approx(0.04)
+    assert shipped.tyre_forces == "estimated" and shipped.noise["y"].sigma == 0.02
+    with pytest.raises(ValueError, match="realistic"):
+        from fourws_bringup.core.conditions import condition_mapping
+
+        condition_mapping("surreal")

@@ -255,8 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-plots", action="store_true", help="skip the figures")
     r.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
     r.add_argument("--condition", default=None,
-                   help="the bench: a condition YAML, or SPEC.yaml#NAME for a condition of a "
-                        "sweep spec (e.g. benchmarks/robustness.yaml#all); default ideal")
+                   help="the bench: a shipped condition's name (realistic), a condition "
+                        "YAML, or SPEC.yaml#NAME for a condition of a sweep spec (e.g. "
+                        "benchmarks/robustness.yaml#all); default ideal")
     r.add_argument("--seed", type=int, default=None, help="noise seed (default: the "
                    "condition's, else 0)")
     r.set_defaults(func=_cmd_run)
