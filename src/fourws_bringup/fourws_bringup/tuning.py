@@ -17,6 +17,8 @@ The procedure, the same for every group of controllers (the spec's ``groups``):
    ``fourws sweep``; scenarios and conditions disjoint from the reported ones). A controller's
    score is its worst max |e_Y| (on the truth) over those runs, infinite if one aborts; the
    candidate's score is the worst over the group's controllers (one common scaling).
+   Evaluated with exact pruning (:func:`tune`): a candidate whose runs so far are already
+   worse than the best complete candidate is abandoned; the choice is a full evaluation's.
 4. **Choice.** The lowest score; ties go to the lower worst ρ, then to the grid order. The
    chosen values are written into each preset of the group between the markers
    :data:`BEGIN` and :data:`END` of its ``mpc_node`` section; ``--check`` writes nothing and
@@ -153,63 +155,86 @@ def _radius_job(args: tuple[TuningSpec, Group, dict[str, float]]) -> float:
 
 
 def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> list[Any]:
+    """A candidate's runs, controller by controller in the group's order (the first
+    controller is the one expected to score worst: the pruning of :func:`tune` then
+    stops a losing candidate early)."""
     from .sweep import Job
 
     jobs = []
-    for name, raw in spec.conditions.items():
-        for seed in spec.seeds:
-            cond = condition_from_mapping({**condition_mapping(raw), "name": str(name)},
-                                          seed=seed)
-            cond = dataclasses.replace(cond, mpc_overrides={**cond.mpc_overrides, **cand})
-            for c in group.controllers:
+    for c in group.controllers:
+        for name, raw in spec.conditions.items():
+            for seed in spec.seeds:
+                cond = condition_from_mapping({**condition_mapping(raw), "name": str(name)},
+                                              seed=seed)
+                cond = dataclasses.replace(cond, mpc_overrides={**cond.mpc_overrides, **cand})
                 for s in spec.scenarios:
                     jobs.append(Job(c, s, cond))
     return jobs
 
 
+def _score(row: Mapping[str, Any]) -> float:
+    return float(row["max_abs_lateral_error_m"]) if row.get("completed") else math.inf
+
+
 def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
-    """(chosen values per group, one report row per candidate): steps 1-4."""
-    from concurrent.futures import ProcessPoolExecutor
+    """(chosen values per group, one report row per kept candidate): steps 1-4.
 
-    from .sweep import run_sweep
+    Step 3 is evaluated with exact pruning: the kept candidates are run in grid order, a
+    batch of ``workers`` runs at a time, and a candidate is abandoned as soon as one of its
+    runs is worse than the best complete candidate's score (its own score, a maximum, can
+    then only be worse). The choice is the one a full evaluation makes; the report gives
+    a pruned candidate's lower bound."""
+    from concurrent.futures import Executor, ProcessPoolExecutor
+
+    from .sweep import run_job
+
+    class _Serial(Executor):
+        def map(self, fn, *its, **_kw):  # type: ignore[override]
+            return map(fn, *its)
 
     chosen: dict[str, dict[str, float]] = {}
     report: list[dict[str, Any]] = []
-    for group in spec.groups:
-        cands = candidates(spec, group)
-        args = [(spec, group, c) for c in cands]
-        if workers > 1:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                radii = list(pool.map(_radius_job, args))
-        else:
-            radii = [_radius_job(a) for a in args]
-        kept = [(c, r) for c, r in zip(cands, radii, strict=True)
-                if r <= spec.max_spectral_radius]
-        if progress:
-            print(f"[tune] {group.name}: {len(kept)} of {len(cands)} candidates have "
-                  f"rho <= {spec.max_spectral_radius}", file=sys.stderr)
-        if not kept:
-            raise ValueError(f"group {group.name}: no candidate of the grid has a spectral "
-                             f"radius <= {spec.max_spectral_radius}; widen grid_exponents")
-        jobs = [j for c, _ in kept for j in _jobs(spec, group, c)]
-        rows = run_sweep(jobs, workers, progress=progress)
-        per = len(jobs) // len(kept)
-        best: tuple[float, float, int] | None = None
-        for k, (c, r) in enumerate(kept):
-            chunk = rows[k * per:(k + 1) * per]
-            by_ctrl: dict[str, float] = {}
-            for row in chunk:
-                e = (float(row["max_abs_lateral_error_m"]) if row.get("completed")
-                     else math.inf)
-                by_ctrl[row["controller"]] = max(by_ctrl.get(row["controller"], 0.0), e)
-            score = max(by_ctrl.values())
-            report.append({"group": group.name, **c, "worst_rho": round(r, 5),
-                           "score_m": score, **{f"max_ey_{n}": v for n, v in by_ctrl.items()}})
-            key = (score, r, k)
-            if best is None or key < best:
-                best = key
-        chosen[group.name] = kept[best[2]][0]
+    batch = max(workers, 1)
+    with (ProcessPoolExecutor(max_workers=workers) if workers > 1 else _Serial()) as pool:
+        for group in spec.groups:
+            cands = candidates(spec, group)
+            radii = list(pool.map(_radius_job, [(spec, group, c) for c in cands]))
+            kept = [(c, r) for c, r in zip(cands, radii, strict=True)
+                    if r <= spec.max_spectral_radius]
+            if progress:
+                print(f"[tune] {group.name}: {len(kept)} of {len(cands)} candidates have "
+                      f"rho <= {spec.max_spectral_radius}", file=sys.stderr)
+            if not kept:
+                raise ValueError(f"group {group.name}: no candidate of the grid has a "
+                                 f"spectral radius <= {spec.max_spectral_radius}; widen "
+                                 "grid_exponents")
+            best: tuple[float, float, int] | None = None
+            for k, (c, r) in enumerate(kept):
+                jobs = _jobs(spec, group, c)
+                by_ctrl: dict[str, float] = {}
+                done = 0
+                while done < len(jobs):
+                    for row in pool.map(run_job, jobs[done:done + batch]):
+                        by_ctrl[row["controller"]] = max(by_ctrl.get(row["controller"], 0.0),
+                                                         _score(row))
+                    done = min(done + batch, len(jobs))
+                    if best is not None and max(by_ctrl.values()) > best[0]:
+                        break
+                score = max(by_ctrl.values())
+                complete = done == len(jobs)
+                report.append({"group": group.name, **c, "worst_rho": round(r, 5),
+                               "runs": done, "score_m": score if complete else None,
+                               "pruned_above_m": None if complete else score,
+                               **{f"max_ey_{n}": v for n, v in by_ctrl.items()}})
+                if progress:
+                    print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
+                          + (f"score {score:.4f} m" if complete else
+                             f"pruned after {done} runs (> {best[0]:.4f} m)"),
+                          file=sys.stderr)
+                if complete and (best is None or (score, r, k) < best):
+                    best = (score, r, k)
+            chosen[group.name] = kept[best[2]][0]
     return chosen, report
 
 
