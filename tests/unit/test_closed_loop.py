@@ -18,6 +18,16 @@ BENCH = {"dlc_60_mu05": (ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml", 1
          "dlc_90_mu06": (ROOT / "benchmarks/scenarios/bench_dlc_90_mu06.yaml", 250.0)}
 
 
+#: 26 s and 31 s: the manoeuvre (10.4 s at 60 km/h) and 15 s or 20 s of the 30 s lead-out
+#: (the bench runs all of it)
+IDEAL_STEPS, REALISTIC_STEPS = 2600, 3100
+
+
+def _ran_out(m: dict) -> bool:
+    """The run lasted its step budget: not aborted (left the road, spun) before."""
+    return m["reason"].startswith("max_steps") and not m["reason"].startswith("aborted")
+
+
 def _lead_out_rms(log, x_end: float, window_s: float = 5.0) -> np.ndarray:
     """Yaw-rate RMS (rad/s, the plant's truth) over consecutive windows of the lead-out (X
     beyond the paper's end of run)."""
@@ -30,15 +40,16 @@ def _lead_out_rms(log, x_end: float, window_s: float = 5.0) -> np.ndarray:
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", sorted(BENCH))
 def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenario):
-    """The paper's setting (truth in, no delay): every preset completes; the presets with
+    """The paper's setting (truth in, no delay): every preset runs the manoeuvre and 15 s of
+    lead-out without abort; the presets with
     rear steer hold the path within a third of the front-steer controllers' max |e_Y| and
     sideslip (the rear axle steers the sideslip away; front steer alone must yaw the car
-    into the lane) and within the paper's 0.089 m; on the 30 s lead-out the yaw rate dies
-    out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
+    into the lane) and within the paper's 0.089 m; on the lead-out (15 s of it) the yaw rate
+    dies out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
     path, x_end = BENCH[scenario]
-    logs = {c: run_closed_loop(str(path), c) for c in PRESETS}
+    logs = {c: run_closed_loop(str(path), c, IDEAL_STEPS) for c in PRESETS}
     m = {c: log.metrics() for c, log in logs.items()}
-    assert all(m[c]["completed"] for c in PRESETS), m
+    assert all(_ran_out(m[c]) for c in PRESETS), m
     front = min(m[c]["max_abs_lateral_error_m"] for c in ("mpc_fws", "lqr_ff"))
     beta = min(m[c]["max_abs_sideslip_deg"] for c in ("mpc_fws", "lqr_ff"))
     for c in ("mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc"):
@@ -47,7 +58,7 @@ def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenar
     assert m["improved"]["max_abs_lateral_error_m"] < 0.089
     for c, log in logs.items():
         rms = _lead_out_rms(log, x_end)
-        assert len(rms) >= 5 and rms[-1] < 0.01 * rms[0], (c, rms)
+        assert len(rms) >= 3 and rms[-1] < 0.01 * rms[0], (c, rms)
 
 
 @pytest.mark.slow
@@ -76,7 +87,8 @@ def test_table_8_the_yaw_moment_is_used_and_the_allocation_ties():
 def test_realistic_world_every_preset_completes_and_the_lead_out_does_not_grow(scenario, seed):
     """Under the bench's "all" (localisation and IMU noise, 1 period of delay, 40 ms of
     steering dead time, estimated tyre forces; the delays known to the controllers): every
-    preset completes the paper scenario and its lead-out. The noise keeps exciting the loop,
+    preset runs the paper scenario and 20 s of its lead-out without abort (the bench runs
+    all 30 s over five seeds). The noise keeps exciting the loop,
     so the yaw rate settles to a noise-driven level instead of zero: a slowly growing
     oscillation would raise it, so the RMS of the last 10 s may not exceed 1.25 × the RMS
     of the 10 s before."""
@@ -84,9 +96,9 @@ def test_realistic_world_every_preset_completes_and_the_lead_out_does_not_grow(s
     cond = load_condition(str(ROOT / "benchmarks/robustness.yaml#all"), seed=seed)
     assert cond.known_delays and cond.delay_periods == 1
     for c in PRESETS:
-        log = run_closed_loop(str(path), c, condition=cond)
+        log = run_closed_loop(str(path), c, REALISTIC_STEPS, condition=cond)
         m = log.metrics()
-        assert m["completed"], (c, m)
+        assert _ran_out(m), (c, m)
         rms = _lead_out_rms(log, x_end)
         late, before = np.sqrt(np.mean(rms[-2:] ** 2)), np.sqrt(np.mean(rms[-4:-2] ** 2))
         assert late <= 1.25 * before, (c, rms)

@@ -55,12 +55,18 @@ def test_presets_load(name):
 
 
 def test_presets_share_one_cost_scaling_and_constraints():
-    shared = [f.name for f in dataclasses.fields(MpcConfig)
-              if f.name not in ("controller", "use_rear_steer", "use_dyc", "weights_mode",
-                                "horizons_mode", "law")]
-    cfgs = [_preset(n)[0] for n in PRESETS]
+    """The paper's presets differ only in their switches; lqr_ff (another law) shares every
+    key but its own tuned Bryson maxima and the MPC cost it does not have."""
+    switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
+                "law")
+    shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
+    mpc = [_preset(n)[0] for n in PRESETS if n != "lqr_ff"]
     for name in shared:
-        assert len({getattr(c, name) for c in cfgs}) == 1, name
+        assert len({getattr(c, name) for c in mpc}) == 1, name
+    lqr = _preset("lqr_ff")[0]
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg"}
+    for name in set(shared) - own:
+        assert getattr(lqr, name) == getattr(mpc[0], name), name
 
 
 @pytest.mark.parametrize("key,value", [
