@@ -158,6 +158,18 @@ class MpcResult:
     ref_speed: float = 0.0
 
 
+def initial_state(model: PredictionModel, s: VehicleSample, ref: Reference,
+                  near: NearestPoint, frame: str = "path") -> np.ndarray:
+    """ζ0 = [vy, vx, φ, r, Y, X] in the prediction frame (the path frame at ``near``, or the
+    map frame for ``global``), extended by the model's own measured states."""
+    zeta = np.zeros(N_STATE)
+    zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = s.vy, s.vx, s.yaw_rate
+    X, Y, phi = (ref.to_path_frame(near, s.x, s.y, s.yaw) if frame == "path"
+                 else (s.x, s.y, s.yaw))
+    zeta[StateIdx.PHI], zeta[StateIdx.Y], zeta[StateIdx.X] = phi, Y, X
+    return model.measured_state(zeta, s.steer_front, s.steer_rear)
+
+
 class MpcController:
     """Section 3's MPC; one instance per vehicle. Stateful: previous input, plan, horizons.
 
@@ -334,14 +346,7 @@ class MpcController:
         ζ0; with known delays ζ0 predicted over them (``delay``); the reference outputs from
         the delayed point on."""
         c = self.cfg
-        zeta = np.zeros(N_STATE)
-        zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = s.vy, s.vx, s.yaw_rate
-        if c.prediction_frame == "path":
-            X, Y, phi = ref.to_path_frame(err.near, s.x, s.y, s.yaw)
-        else:
-            X, Y, phi = s.x, s.y, s.yaw
-        zeta[StateIdx.PHI], zeta[StateIdx.Y], zeta[StateIdx.X] = phi, Y, X
-        zeta = self.model.measured_state(zeta, s.steer_front, s.steer_rear)
+        zeta = initial_state(self.model, s, ref, err.near, c.prediction_frame)
         n_d = self._n_delay
         phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, hz.n_p + n_d, s.yaw,
                                      c.prediction_frame)

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.controller import MpcController, MpcResult, VehicleSample
+from fourws_mpc.core.controller import MpcController, MpcResult, VehicleSample, initial_state
 from fourws_mpc.core.delay import (
     CommandBuffer,
     channel_delays,
@@ -35,7 +35,7 @@ from fourws_mpc.core.delay import (
     register_schedule,
 )
 from fourws_mpc.core.lqr import LqrLateral, LqrWeights
-from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
+from fourws_mpc.core.model import N_INPUT, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.reference import PathErrors, Reference
 
@@ -114,11 +114,7 @@ class LqrFfController:
             e1, e2 = err.lateral_error, err.heading_error
             return np.array([e1, s.vy + s.vx * e2, e2, s.yaw_rate - s.vx * kappa])
         c = self.cfg
-        zeta = np.zeros(N_STATE)
-        zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = s.vy, s.vx, s.yaw_rate
-        X, Y, phi = ref.to_path_frame(err.near, s.x, s.y, s.yaw)
-        zeta[StateIdx.PHI], zeta[StateIdx.Y], zeta[StateIdx.X] = phi, Y, X
-        zeta = self.model.measured_state(zeta, s.steer_front, s.steer_rear)
+        zeta = initial_state(self.model, s, ref, err.near, "path")
         Ak, Bk, dk = self.model.discretise(zeta, self.u_prev, c.dt_s)
         z = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
         phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, self._n_delay, s.yaw, "path")
