@@ -113,3 +113,38 @@ def test_the_first_state_waits_until_the_outputs_have_their_subscribers(graph, r
 
     assert ros.spin_until(answered, 20.0), "the third subscriber never got step 0"
     assert 0 in cmds and late[0].delta_front == cmds[0].delta_front
+
+
+def test_a_state_that_comes_before_the_reference_is_answered_when_it_arrives(graph, ros):
+    """/vehicle/state and /reference/trajectory are separate writers: nothing orders them. A
+    lockstep bag replay publishes its first state once, so a state that beat the reference
+    must be answered when the reference arrives, not dropped (that would stall the replay for
+    its lockstep timeout and lose a command)."""
+    preset = config_dir("fourws_bringup") / "controllers" / "mpc_4ws.yaml"
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)])])
+    cmds: dict[int, list[MpcCommand]] = {}
+    ros.node.create_subscription(
+        MpcCommand, "/control/mpc_command",
+        lambda m: cmds.setdefault(stamp_to_ns(m.header.stamp), []).append(m), CONTROL_QOS)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0)
+    state = VehicleState(x=0.0, y=0.05, vx=16.667)
+    state.header.stamp = ns_to_stamp(70_000_000)
+    state.mu, state.fz = np.full(4, 0.5), np.full(4, 1800.0)
+    pub.publish(state)
+    assert ros.spin_until(lambda: pub.wait_for_all_acked(Duration(seconds=0)), 10.0)
+    ros.spin_until(lambda: bool(cmds), 0.5)
+    assert not cmds, "answered a state without a reference"
+    path = load_scenario("dlc_60_mu05").path
+    pub_ref.publish(ReferenceTrajectory(x=path.x.tolist(), y=path.y.tolist(),
+                                        yaw=path.yaw.tolist(),
+                                        curvature=path.curvature.tolist(),
+                                        speed=path.speed.tolist()))
+    assert ros.spin_until(lambda: 70_000_000 in cmds, 10.0), "the waiting state was dropped"
+    ros.spin_until(lambda: False, 0.5)
+    assert len(cmds[70_000_000]) == 1 and set(cmds) == {70_000_000}
+    assert math.isfinite(cmds[70_000_000][0].delta_front)

@@ -6,7 +6,10 @@ Each state goes through, in this order:
    :class:`~fourws_common.input_guard.InputConfig`);
 2. plausibility (:func:`~fourws_common.input_guard.implausible_fields` on the fields the core
    reads): an implausible state is rejected and counted;
-3. a reference must have arrived (else the state is not answered; logged every 5 s);
+3. a reference must have arrived (else the state is not answered; logged every 5 s). The
+   newest state that waited for it is kept and answered by :meth:`StateInput.retry_waiting`
+   when the reference comes: state and reference are separate DDS writers with no order
+   between them, and a lockstep bag replay does not publish its first state twice;
 4. the stamp rule (:class:`~fourws_common.input_guard.StampGate`): a repeat is answered from
    the cache, a stamp in the past or the far future is rejected, a confirmed jump back is a
    new run (the node's core is reset), a confirmed jump ahead continues;
@@ -68,6 +71,7 @@ class StateInput:
         self._outputs_matched = False  # checked until the first answer of a run only
         self._checked = tuple(checked)
         self._core_name = core_name
+        self._waiting: Any = None  # the newest plausible state that came before a reference
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self._match_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
@@ -85,6 +89,13 @@ class StateInput:
         again before the new run's first answer."""
         self.gate.reset()
         self._outputs_matched = False
+
+    def retry_waiting(self) -> None:
+        """Answer the newest state that arrived before the node was ready (call when the
+        reference arrives); nothing if none waited."""
+        msg, self._waiting = self._waiting, None
+        if msg is not None and self._h.ready():
+            self._on_state(msg)
 
     def _unmatched(self) -> list[str]:
         """Output topics with fewer matched subscriptions than their count (lockstep), until
@@ -107,8 +118,10 @@ class StateInput:
                                 f"{stamp_ns} ns: {', '.join(bad)}")
             return
         if not self._h.ready():
+            self._waiting = msg
             self._wait_log(stamp_ns, "no reference trajectory yet: not answering states")
             return
+        self._waiting = None
         unmatched = self._unmatched()
         if unmatched:
             self._match_log(stamp_ns, f"waiting for {self.inputs.config.wait_for_subscribers} "

@@ -105,6 +105,7 @@ class MpcNode(Node):
         self._reset()
         self.get_logger().info(f"reference with {len(msg.x)} points"
                                + ("; new run: controller reset" if new_run else ""))
+        self.state_input.retry_waiting()
 
     def _reset(self) -> None:
         self.ctrl.reset()

@@ -69,6 +69,7 @@ class SpeedPidNode(Node):
         self.get_logger().info(f"reference with {profile.speed.size} points, speed "
                                f"{profile.speed.min():.2f}..{profile.speed.max():.2f} m/s"
                                + ("; new run: PID reset" if new_run else ""))
+        self.state_input.retry_waiting()
 
     def _reset(self) -> None:
         self.pid.reset()
