@@ -237,7 +237,7 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
     """Median and worst max |e_Y| over seeds, aborted runs, margins, per cell."""
     from fourws_sim.core.scenario import load_scenario
 
-    from .core.configs import load_mpc_config
+    from .core.configs import load_mpc_config, plant_values
     from .core.margins import margins
 
     cells: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
@@ -254,8 +254,11 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
         aborted = sum(1 for r in rs if not r.get("completed"))
         try:
             cnd = conds[cond]
-            cfg = load_mpc_config(c, node_parameters(cnd)["mpc_node"])
-            scn = load_scenario(sc)
+            params = node_parameters(cnd)
+            cfg = load_mpc_config(c, params["mpc_node"])
+            # the plant as the run had it (a condition's vehicle overrides, e.g. slow steering)
+            plant = {**plant_values(), **params["plant_node"]}
+            scn = load_scenario(sc).with_vehicle_overrides(plant.get("vehicle_overrides", ""))
             mg = margins(cfg, scn.vehicle, scn.speed_mps, delay_periods=cnd.delay_periods,
                          steer_dead_time_s=cnd.steer_dead_time_s)
             rho, pm = f"{mg.spectral_radius:.4f}", (
@@ -265,7 +268,8 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
         med = f"{float(np.median(e)):.4f}" if e else "—"
         worst = f"{max(e):.4f}" if e else "—"
         act = [_median(rs, k) for k in ("yaw_rate_rms_tail_deg_s", "steer_rate_rms_deg_s")]
-        lines.append(f"| {sc} | {cond} | {c} | {len(rs)} | {aborted} | {med} | {worst} | "
+        name = Path(sc).stem if sc.endswith((".yaml", ".yml")) else sc
+        lines.append(f"| {name} | {cond} | {c} | {len(rs)} | {aborted} | {med} | {worst} | "
                      f"{act[0]} | {act[1]} | {rho} | {pm} |")
     return "\n".join(lines) + "\n"
 
