@@ -86,7 +86,7 @@ class _DeafMonitor:
     """A run monitor that never hears the plant (it matched too late): the outcome must not
     depend on it."""
 
-    def __init__(self, _domain_id: int) -> None:
+    def __init__(self, _domain_id: int, _namespace: str = "/") -> None:
         self.sim_time_s, self.wall_time_s, self.status = 0.0, None, {}
 
     def spin(self, timeout_s: float) -> None:
@@ -139,7 +139,7 @@ def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
     leaves the road on dlc_60_mu05: the run ends ABORTED, exit code 3, not a death."""
     preset = yaml.safe_load((config_dir("fourws_bringup") / "controllers" / "mpc_fws.yaml")
                             .read_text(encoding="utf-8"))
-    preset["mpc_node"]["ros__parameters"].update(
+    preset["/**/mpc_node"]["ros__parameters"].update(
         controller="paper_mpc_fws", prediction_model="single_track",
         prediction_discretisation="euler", scale_phi_deg=0.30)
     path = tmp_path / "paper_mpc_fws.yaml"

@@ -14,7 +14,7 @@ from fourws_common.resources import config_dir
 from fourws_torque_alloc.core.allocation import AllocatorConfig
 
 YAML = config_dir("fourws_torque_alloc") / "allocator.yaml"
-NODE = "allocator_node"
+NODE = "/**/allocator_node"
 # Parameters that belong to the node wrapper, not to the core (allocator_node.py).
 NODE_ONLY = {"sync", "use_sim_time"}
 

@@ -13,7 +13,7 @@ from fourws_common.resources import config_dir
 from fourws_torque_alloc.core.pid import SpeedPidConfig
 
 YAML = config_dir("fourws_torque_alloc") / "speed_pid.yaml"
-NODE = "speed_pid_node"
+NODE = "/**/speed_pid_node"
 
 
 

@@ -1,6 +1,8 @@
 """Recorder node: every topic of the graph, serialized as received, into a rosbag2-layout MCAP bag.
 
-Subscribes to each topic in ``topics`` with ``raw=True`` (no decode, no re-encode) and the QoS
+Subscribes to each topic in ``topics`` (graph topics by the table's names,
+``/vehicle/state``; resolved in the recorder's namespace, so ``-r __ns:=/car1`` records
+``/car1/vehicle/state``, as the bag then names it) with ``raw=True`` (no decode, no re-encode) and the QoS
 its publisher offers (the topic table's QoS kind, ``fourws_common.topics``: control per step,
 latched for ``/reference/*`` and ``/run/status``, clock for ``/clock``, diagnostics for
 ``/diagnostics``), and appends every message to
@@ -53,7 +55,14 @@ from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import PROFILES, dict_from_profile, profile_from_dict
 from fourws_common.ros_params import ParamBinding
-from fourws_common.topics import DEFAULT_TOPICS, TOPICS, TopicInfo, qos_kind, topic_info
+from fourws_common.topics import (
+    DEFAULT_TOPICS,
+    TOPICS,
+    TopicInfo,
+    graph_name,
+    qos_kind,
+    topic_info,
+)
 
 from .bag.errors import BagError
 from .bag.schema import cdr_stamp_ns
@@ -206,10 +215,14 @@ class RecorderNode(Node):
         names = [i.name for i in infos]
         if len(set(names)) != len(names):
             raise ValueError(f"topics: a topic is listed twice: {names}")
-        profiles = {}
+        # A graph topic is subscribed by its relative name, so a recorder in a namespace
+        # records that namespace's graph; the bag holds the resolved names, as rosbag2's.
+        profiles, kinds = {}, {}
         for i, info in enumerate(infos):
-            profiles[info.name] = qos_of(info)
-            infos[i] = TopicInfo(info.name, info.type, dict_from_profile(profiles[info.name]))
+            resolved = self._resolve(info.name)
+            profiles[resolved], kinds[resolved] = qos_of(info), graph_kind(info)
+            infos[i] = TopicInfo(resolved, info.type, dict_from_profile(profiles[resolved]))
+        names = [i.name for i in infos]
         classes = {info.name: message_class(info.type) for info in infos}
         try:
             self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
@@ -221,13 +234,14 @@ class RecorderNode(Node):
         self._last_rx = time.monotonic()
         self.lost: dict[str, int] = {}  # DDS's message-lost totals
         self.gaps = {i.name: StampGaps() for i in infos
-                     if graph_kind(i) in PER_STEP_KINDS and self.writer.stamped(i.name)}
+                     if kinds[i.name] in PER_STEP_KINDS and self.writer.stamped(i.name)}
         self.matched: dict[str, int] = {}
-        gate = cfg.start_gate_topic
+        gate = self._resolve(cfg.start_gate_topic) if cfg.start_gate_topic else ""
         if gate and gate not in names:
-            raise ValueError(f"start_gate_topic: {gate} is not among the recorded topics")
+            raise ValueError(f"start_gate_topic: {cfg.start_gate_topic} is not among the "
+                             "recorded topics")
         self._gate_waits = [i.name for i in infos if i.name != gate
-                            and qos_kind(i.name) == "control"]
+                            and qos_kind(graph_name(i.name, self.get_namespace())) == "control"]
         self._pending_gate = next((i for i in infos if i.name == gate), None)
         self._profiles, self._classes = profiles, classes
         self._started_at = time.monotonic()
@@ -240,6 +254,11 @@ class RecorderNode(Node):
         self.get_logger().info(
             f"recording {len(infos)} topics to {self.writer.path} (chunks of "
             f"{cfg.chunk_size_bytes} bytes, {cfg.compression}): {', '.join(names)}")
+
+    def _resolve(self, name: str) -> str:
+        """A graph topic's name in this node's namespace; any other name as given."""
+        topic = TOPICS.get(name)
+        return self.resolve_topic_name(topic.ros_name) if topic is not None else name
 
     def _subscribe(self, topic: str) -> None:
         def on_matched(info) -> None:

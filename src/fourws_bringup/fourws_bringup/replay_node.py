@@ -41,7 +41,15 @@ from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import PROFILES, profile_from_dict, qos_of
 from fourws_common.ros_params import ParamBinding
-from fourws_common.topics import CLOCK, RUN_STATUS, TOPICS, VEHICLE_STATE, qos_kind
+from fourws_common.topics import (
+    CLOCK,
+    RUN_STATUS,
+    TOPICS,
+    VEHICLE_STATE,
+    graph_name,
+    namespace_of,
+    qos_kind,
+)
 
 from .bag.errors import BagError
 from .bag.reader import McapBag
@@ -79,6 +87,11 @@ class ReplayConfig:
             raise ValueError("bag: must be set to a bag folder, run folder or .mcap file")
 
 
+def _ros_name(name: str) -> str:
+    """A graph topic's node-side (relative) name; any other name as given."""
+    return TOPICS[name].ros_name if name in TOPICS else name
+
+
 class ReplayNode(Node):
     """Reads the bag lazily (fourws_bringup.bag.reader.McapBag) and publishes on a 1 ms
     timer."""
@@ -106,31 +119,46 @@ class ReplayNode(Node):
                                  f"{', '.join(sorted(recorded))})")
             self.topics = list(dict.fromkeys(topics_param))
         else:
-            self.topics = [t for t in recorded if t not in (CLOCK.name, RUN_STATUS.name)]
+            self.topics = [t for t in recorded
+                           if graph_name(t, namespace_of(recorded)) not in (CLOCK.name,
+                                                                           RUN_STATUS.name)]
         self.pubs = {}
         self.stamped: dict[str, bool] = {}
+        # a graph topic is published by its relative name, in this node's namespace, whatever
+        # namespace it was recorded in (a bag of /car1 replays into /car2 with __ns:=/car2)
+        ns = namespace_of(recorded)
+        self._graph = {t: graph_name(t, ns) for t in recorded}
         for t in self.topics:
             ch = recorded[t]
+            g = self._graph[t]
             # the offered QoS as recorded; the table's for a channel without one
-            qos = profile_from_dict(ch.qos) if ch.qos else PROFILES[qos_kind(t)]
-            self.pubs[t] = self.create_publisher(message_class(ch.type), t, qos)
+            qos = profile_from_dict(ch.qos) if ch.qos else PROFILES[qos_kind(g)]
+            self.pubs[t] = self.create_publisher(message_class(ch.type), _ros_name(g), qos)
             self.stamped[t] = first_field_is_stamp(ch.definition)
         self.clock_pub = None
         if cfg.publish_clock and CLOCK.name not in self.topics:
-            self.clock_pub = self.create_publisher(Clock, CLOCK.name, qos_of(CLOCK))
+            self.clock_pub = self.create_publisher(Clock, CLOCK.ros_name, qos_of(CLOCK))
         self.lockstep = bool(cfg.lockstep_topic)
+        self._trigger: str | None = None
         self.answered: set[int] = set()
         self.lockstep_misses = 0
         if self.lockstep:
-            known = recorded.get(cfg.lockstep_topic) or TOPICS.get(cfg.lockstep_topic)
+            lock = graph_name(cfg.lockstep_topic, ns)
+            known = (recorded.get(cfg.lockstep_topic) or TOPICS.get(lock)
+                     or next((recorded[t] for t, g in self._graph.items() if g == lock), None))
             ltype = known.type if known is not None else None
             if ltype is None:
                 raise ValueError(f"lockstep_topic: type of {cfg.lockstep_topic} unknown (not in "
                                  "the bag nor a graph topic)")
-            if cfg.lockstep_trigger not in self.topics:
+            trigger = graph_name(cfg.lockstep_trigger, ns)
+            self._trigger = next((t for t in self.topics
+                                  if t == cfg.lockstep_trigger or self._graph[t] == trigger),
+                                 None)
+            if self._trigger is None:
                 raise ValueError(f"lockstep_trigger: {cfg.lockstep_trigger} is not replayed")
-            self.create_subscription(message_class(ltype), cfg.lockstep_topic, self._on_answer,
-                                     PROFILES[qos_kind(cfg.lockstep_topic)], raw=True)
+            self._lock_sub = self.create_subscription(
+                message_class(ltype), _ros_name(lock), self._on_answer,
+                PROFILES[qos_kind(lock)], raw=True)
         self._messages = self.bag.messages(self.topics)
         self._next = None
         self.counts = {t: 0 for t in self.topics}
@@ -193,7 +221,7 @@ class ReplayNode(Node):
                 return
             self._next = None
             self._publish(topic, data, stamp)
-            if (self.lockstep and topic == self.cfg.lockstep_trigger and stamp is not None
+            if (self.lockstep and topic == self._trigger and stamp is not None
                     and stamp not in self.answered):
                 self._waiting = (stamp, time.monotonic() + self.cfg.lockstep_timeout_s)
                 return
@@ -224,7 +252,7 @@ class ReplayNode(Node):
 
     def _unmatched(self) -> list[str]:
         out = [t for t, p in self.pubs.items() if p.get_subscription_count() < 1]
-        if self.lockstep and self.count_publishers(self.cfg.lockstep_topic) < 1:
+        if self.lockstep and self.count_publishers(self._lock_sub.topic_name) < 1:
             out.append(f"{self.cfg.lockstep_topic} (no publisher)")
         return out
 

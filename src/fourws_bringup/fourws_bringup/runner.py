@@ -29,7 +29,14 @@ from fourws_common.topics import RUN_STATUS, VEHICLE_GROUND_TRUTH, VEHICLE_STATE
 
 from .core.conditions import IDEAL, Condition, node_parameters
 from .core.configs import controller_preset_path, node_values, params_files
-from .supervisor import DomainLease, NodeDied, NodeSpec, Supervisor, SupervisorError
+from .supervisor import (
+    DomainLease,
+    NodeDied,
+    NodeSpec,
+    Supervisor,
+    SupervisorError,
+    normalise_namespace,
+)
 
 RECORDER_NICE = 10  # niceness added to the recorder process
 #: Process layouts of a run: container process name and the nodes it hosts (None: one
@@ -135,7 +142,7 @@ def prepare_out_dir(out_dir: Path, force: bool, *,
 def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
                 extra_plant: dict | None = None, compose: str = "none",
                 status_file: Path | None = None, use_sim_time: bool = False,
-                condition: Condition = IDEAL) -> list[NodeSpec]:
+                condition: Condition = IDEAL, namespace: str = "") -> list[NodeSpec]:
     """The node list of a run: every node with its package YAML and the controller preset.
 
     ``compose`` (:data:`COMPOSE_LAYOUTS`) picks the processes: ``none``, one per node;
@@ -143,7 +150,9 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     too. Same nodes, parameters and topics in every layout (:mod:`fourws_bringup.container`);
     the recorder always has a process of its own. ``status_file``: where the plant writes
     its final status; ``use_sim_time``: every node's clock follows /clock; ``condition``
-    (``core.conditions``): the bench, as node parameters (``node_parameters``).
+    (``core.conditions``): the bench, as node parameters (``node_parameters``);
+    ``namespace``: every node's (its topics follow; ``/clock`` and ``/diagnostics`` stay
+    global), so several runs can share a domain.
     """
     if compose not in COMPOSE_LAYOUTS:
         raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
@@ -187,8 +196,9 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                  parameters={**bench["allocator_node"], "sync": sync,
                              **waits["allocator_node"]}),
     ]
-    if use_sim_time:
-        for spec in specs:
+    for spec in specs:
+        spec.namespace = normalise_namespace(namespace)
+        if use_sim_time:
             spec.parameters["use_sim_time"] = True
     layout = COMPOSE_LAYOUTS[compose]
     if layout is not None:
@@ -205,7 +215,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                                           "start_gate_topic": VEHICLE_STATE.name,
                                           "use_sim_time": use_sim_time,
                                           "topics": recorded_topics(condition)},
-                              nice=RECORDER_NICE))
+                              nice=RECORDER_NICE, namespace=namespace))
     return specs
 
 
@@ -262,7 +272,7 @@ class _Monitor:
     from its heartbeats, the end and the plant's own wall time from its last message. It
     takes no per-step topic, so watching a run costs the graph nothing per step."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, namespace: str = "/") -> None:
         import rclpy
         from std_msgs.msg import String
 
@@ -272,12 +282,13 @@ class _Monitor:
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx, domain_id=domain_id)
         self.node = rclpy.create_node(f"fourws_run_monitor_{id(self)}", context=self.ctx,
-                                      start_parameter_services=False)
+                                      namespace=namespace, start_parameter_services=False)
         self.sim_time_s = 0.0
         self.wall_time_s: float | None = None  # the plant's, from its first answered state
         self.ended_wall: float | None = None
         self.status: dict = {}
-        self.node.create_subscription(String, RUN_STATUS.name, self._on_status, qos_of(RUN_STATUS))
+        self.node.create_subscription(String, RUN_STATUS.ros_name, self._on_status,
+                                      qos_of(RUN_STATUS))
         from rclpy.experimental import EventsExecutor
 
         self.ex = EventsExecutor(context=self.ctx)
@@ -312,24 +323,29 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
               record: bool = True, progress: bool = True, timeout_s: float = 1800.0,
               extra_plant: dict | None = None, compose: str = "none",
               use_sim_time: bool = False, condition: Condition = IDEAL,
+              namespace: str = "", domain_id: int | None = None,
               stream=sys.stderr) -> RunOutcome:
-    """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome."""
+    """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome.
+
+    ``namespace``: the graph's (:func:`graph_specs`); ``domain_id``: run in this ROS domain
+    (default: a free one of this host, leased for the run)."""
     bag_dir = out_dir / "bag" if record else None
     status_file = out_dir / "logs" / "plant_status.json"
     with contextlib.suppress(FileNotFoundError):
         status_file.unlink()
     specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose,
                         status_file=status_file, use_sim_time=use_sim_time,
-                        condition=condition)
+                        condition=condition, namespace=namespace)
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)  # its process
-    lease = DomainLease()
-    sup = Supervisor(specs, lease.domain_id, out_dir / "logs")
+    lease = DomainLease() if domain_id is None else None
+    domain = lease.domain_id if lease is not None else int(domain_id)
+    sup = Supervisor(specs, domain, out_dir / "logs")
     monitor = None
     t0 = time.monotonic()
     try:
         # Wall time and the real-time factor are the plant's own (its status): from its
         # first answered state to its end, start-up excluded. t0 only bounds the duration.
-        monitor = _Monitor(lease.domain_id)
+        monitor = _Monitor(domain, normalise_namespace(namespace))
         sup.start(timeout_s=60.0)
         t0 = time.monotonic()
         last_print = 0.0
@@ -375,7 +391,8 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
         if monitor is not None:
             monitor.close()
         sup.stop()
-        lease.release()
+        if lease is not None:
+            lease.release()
     if progress:
         stream.write("\n")
     return outcome

@@ -100,15 +100,24 @@ class NodeSpec:
     # Exit codes that end this process normally (not a death); the plant's include the
     # run's outcomes (fourws_common.exit_codes.RUN_END_CODES).
     end_codes: frozenset[int] = frozenset({0})
+    # ROS namespace of the process's nodes ("" or "/": the root); their relative topics move
+    # with it (``-r __ns:=/car1``)
+    namespace: str = ""
 
     def __post_init__(self) -> None:
         if not 0 <= self.nice <= 19:
             raise ValueError(f"{self.name}: nice must be in 0..19, got {self.nice}")
+        self.namespace = normalise_namespace(self.namespace)
 
     @property
     def graph_names(self) -> tuple[str, ...]:
         """The node names this process puts in the ROS graph."""
         return self.hosts or (self.name,)
+
+    @property
+    def qualified_names(self) -> tuple[str, ...]:
+        """The fully qualified names of :attr:`graph_names` (``/car1/mpc_node``)."""
+        return tuple(f"{self.namespace.rstrip('/')}/{n}" for n in self.graph_names)
 
     @classmethod
     def compose(cls, name: str, specs: list[NodeSpec]) -> NodeSpec:
@@ -126,12 +135,16 @@ class NodeSpec:
         if bad:
             raise ValueError(f"{name}: cannot host {bad} (containers, custom programs, "
                              "remappings and extra arguments stay processes of their own)")
+        spaces = {s.namespace for s in specs}
+        if len(spaces) > 1:
+            raise ValueError(f"{name}: one container has one namespace, got {sorted(spaces)}")
         files = _merge_orders([s.params_files for s in specs], name)
         params = {f"{s.name}:{k}": v for s in specs for k, v in s.parameters.items()}
         return cls(name, "fourws_bringup", "container", params_files=files, parameters=params,
                    log_level=specs[0].log_level, nice=min(s.nice for s in specs),
                    hosts=tuple(s.name for s in specs),
-                   end_codes=frozenset().union(*(s.end_codes for s in specs)))
+                   end_codes=frozenset().union(*(s.end_codes for s in specs)),
+                   namespace=specs[0].namespace)
 
     def command(self) -> list[str]:
         program = self.argv or [str(executable_path(self.package, self.executable))]
@@ -141,6 +154,8 @@ class NodeSpec:
         else:
             cmd = [*program, "--ros-args", "-r",
                    f"__node:={self.name}", "--log-level", self.log_level]
+        if self.namespace != "/":
+            cmd += ["-r", f"__ns:={self.namespace}"]
         for f in self.params_files:
             cmd += ["--params-file", str(f)]
         for k, v in self.parameters.items():
@@ -148,6 +163,18 @@ class NodeSpec:
         for src, dst in self.remappings.items():
             cmd += ["-r", f"{src}:={dst}"]
         return cmd + list(self.extra_args)
+
+
+def normalise_namespace(ns: str) -> str:
+    """``car1``, ``/car1/`` -> ``/car1``; ``""`` -> ``/``. ValueError for a name ROS rejects
+    (each token a letter or underscore, then letters, digits, underscores)."""
+    import re
+
+    ns = "/" + ns.strip().strip("/")
+    if ns != "/" and not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", ns):
+        raise ValueError(f"namespace {ns!r}: tokens must start with a letter or underscore "
+                         "and hold letters, digits and underscores only")
+    return ns
 
 
 def _merge_orders(orders: list[list[str]], what: str) -> list[str]:
@@ -269,7 +296,7 @@ class Supervisor:
         try:
             for spec in self.specs:
                 self._spawn(spec)
-            self.wait_for_graph([n for s in self.specs for n in s.graph_names], timeout_s)
+            self.wait_for_graph([n for s in self.specs for n in s.qualified_names], timeout_s)
         except BaseException:
             self.stop()
             raise
@@ -304,7 +331,8 @@ class Supervisor:
         return self._probe
 
     def wait_for_graph(self, names: list[str], timeout_s: float) -> None:
-        """Poll graph introspection until every name is present; raise naming the missing.
+        """Poll graph introspection until every fully qualified node name (``/ns/node``) is
+        present; raise naming the missing.
 
         A process that has already ended normally (a short run can start, finish and exit
         before the probe sees it) is not waited for; one that died raises :class:`NodeDied`.
@@ -314,8 +342,9 @@ class Supervisor:
         missing = list(names)
         while True:
             self.check()
-            gone = {n for p in self.ended() for n in self.procs[p].spec.graph_names}
-            present = {n for n, _ns in probe.get_node_names_and_namespaces()} | gone
+            gone = {n for p in self.ended() for n in self.procs[p].spec.qualified_names}
+            present = {f"{ns.rstrip('/')}/{n}"
+                       for n, ns in probe.get_node_names_and_namespaces()} | gone
             missing = [n for n in names if n not in present]
             if not missing:
                 return

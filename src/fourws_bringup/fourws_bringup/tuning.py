@@ -278,7 +278,7 @@ def replace_block(text: str, lines: list[str], where: Any = "preset") -> str:
     block = "    " + BEGIN + "\n" + "".join(f"{ln}\n" for ln in lines) + "    " + END + "\n"
     if pat.search(text):
         return pat.sub(lambda _m: block, text, count=1)
-    m = re.search(r"^mpc_node:\n  ros__parameters:\n(?:    .*\n)*", text, re.M)
+    m = re.search(r"^(?:/\*\*/)?mpc_node:\n  ros__parameters:\n(?:    .*\n)*", text, re.M)
     if not m:
         raise ValueError(f"{where}: no 'mpc_node: ros__parameters:' section")
     return text[:m.end()] + block + text[m.end():]

@@ -34,7 +34,8 @@ class NodeHealth:
         self._published: dict[str, int] | None = None
         self._since_publish_s = 0.0
         self._period_s = period_s
-        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.name, qos_of(DIAGNOSTICS))
+        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS.ros_name,
+                                          qos_of(DIAGNOSTICS))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = node.create_timer(CHANGE_POLL_S, self._tick, clock=steady)
 

@@ -132,15 +132,17 @@ def read_yaml_file(path: str | PathLike[str]) -> Any:
 def load_ros_params_yaml(path: str | PathLike[str], node_name: str) -> dict[str, Any]:
     """Read ``node_name: ros__parameters: {...}`` from a ROS 2 params file.
 
-    Accepts the node name with or without a leading slash and the ``/**`` wildcard;
-    later sections override earlier ones as in rcl. Raises ``ValueError`` naming the file
+    Accepts the node name with or without a leading slash, the ``/**`` wildcard and
+    ``/**/node_name`` (the node in any namespace, as the packages' files name it); later
+    sections override earlier ones as in rcl. Raises ``ValueError`` naming the file
     when it cannot be read (:func:`read_yaml_file`) or is not a mapping.
     """
     data = read_yaml_file(path) or {}
     if not isinstance(data, Mapping):
         raise ValueError(f"{path}: expected a mapping at the top level")
     out: dict[str, Any] = {}
-    for key in ("/**", node_name.lstrip("/"), "/" + node_name.lstrip("/")):
+    name = node_name.lstrip("/")
+    for key in ("/**", "/**/" + name, name, "/" + name):
         section = data.get(key)
         if isinstance(section, dict):
             out.update(_flatten(section.get("ros__parameters", {}) or {}))

@@ -80,7 +80,7 @@ class StateInput:
         self.inputs = ParamBinding(node, InputConfig,
                                    on_change=lambda c: self.latest.set_sync(c.sync))
         self.latest.set_sync(self.inputs.config.sync)
-        node.create_subscription(VehicleState, VEHICLE_STATE.name,
+        node.create_subscription(VehicleState, VEHICLE_STATE.ros_name,
                                  health.guard(VEHICLE_STATE.name, self.latest.offer),
                                  LATEST_QOS)
 

@@ -3,8 +3,13 @@
 Each graph topic has its name, ROS type (``pkg/msg/Type``), QoS kind and why it exists; each
 QoS kind its history, depth, reliability, durability and why. Pure Python (no rclpy), so the
 bag code and the pure cores can read it; ``fourws_common.qos`` turns a kind into an rclpy
-``QoSProfile``. Topic names are absolute, as the nodes use them. docs/architecture.md ("The
-graph") shows the same table with each topic's publishers and subscribers.
+``QoSProfile``. ``Topic.name`` is the topic's name in the root namespace, as the table, the
+bags and the tools name it; nodes subscribe and publish ``Topic.ros_name``, which is relative
+(``vehicle/state``), so a node started in a namespace (``-r __ns:=/car1``) moves its topics
+with it and two cars can share a domain. ``/clock`` (one simulated clock per domain, as
+``use_sim_time`` expects) and ``/diagnostics`` (the one topic diagnostic aggregators read)
+stay absolute. docs/architecture.md ("The graph") shows the same table with each topic's
+publishers and subscribers.
 
 Also here: :class:`TopicInfo` (a topic as a bag records it: name, type, offered QoS values)
 and :func:`topic_info`, which looks a recorder's topic spec up in the table.
@@ -12,7 +17,7 @@ and :func:`topic_info`, which looks a recorder's topic spec up in the table.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -71,6 +76,15 @@ class Topic:
     type: str
     qos: str
     reason: str
+
+    @property
+    def ros_name(self) -> str:
+        """The name a node uses: relative to its namespace, except :data:`GLOBAL_NAMES`."""
+        return self.name if self.name in GLOBAL_NAMES else self.name.lstrip("/")
+
+
+#: Topics that stay absolute under a namespace (see the module docstring).
+GLOBAL_NAMES = ("/clock", "/diagnostics")
 
 
 CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", "clock",
@@ -131,6 +145,25 @@ def topic_info(spec: str) -> TopicInfo:
         raise ValueError(f"topics: unknown topic '{name}' (known: {', '.join(TOPICS)}; "
                          "give others as '/name:pkg/msg/Type')")
     return TopicInfo(name, TOPICS[name].type, offered_qos(name))
+
+
+def graph_name(resolved: str, namespace: str) -> str:
+    """The table name of a topic a node in ``namespace`` resolved to ``resolved``
+    (``/car1/vehicle/state`` in ``/car1`` -> ``/vehicle/state``); other names unchanged."""
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    if ns and resolved.startswith(ns + "/") and resolved[len(ns):] in TOPICS:
+        return resolved[len(ns):]
+    return resolved
+
+
+def namespace_of(topic_names: Iterable[str]) -> str:
+    """The namespace a set of recorded topics was published in: the prefix of the one that
+    ends in ``/vehicle/state`` (``/car1`` for ``/car1/vehicle/state``); ``/`` for the root
+    namespace or when none does."""
+    for name in topic_names:
+        if name.endswith(VEHICLE_STATE.name):
+            return name[: -len(VEHICLE_STATE.name)] or "/"
+    return "/"
 
 
 def qos_kind(name: str) -> str:

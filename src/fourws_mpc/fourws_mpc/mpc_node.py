@@ -58,13 +58,13 @@ class MpcNode(Node):
         self.ref_msg: ReferenceTrajectory | None = None
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None
         self.health = NodeHealth(self)
-        self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.name, qos_of(MPC_COMMAND))
+        self.pub_cmd = self.create_publisher(MpcCommand, MPC_COMMAND.ros_name, qos_of(MPC_COMMAND))
         # Built once, every field refilled per step (publish serialises at once); they are
         # also the cached answer to a republished state.
         self._cmd_msg, self._diag_msg = MpcCommand(), MpcDiagnostics()
-        self.pub_diag = self.create_publisher(MpcDiagnostics, MPC_DIAGNOSTICS.name,
+        self.pub_diag = self.create_publisher(MpcDiagnostics, MPC_DIAGNOSTICS.ros_name,
                                               qos_of(MPC_DIAGNOSTICS))
-        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  qos_of(REFERENCE_TRAJECTORY))
         self.state_input = StateInput(

@@ -199,20 +199,20 @@ class PlantNode(Node):
         self.clip_log = RateLimitedLog(log.warning)
         self.late_log = RateLimitedLog(log.warning)
 
-        self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.name,
+        self.pub_state = self.create_publisher(VehicleState, VEHICLE_STATE.ros_name,
                                                qos_of(VEHICLE_STATE))
-        self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.name, qos_of(VEHICLE_ODOM))
+        self.pub_odom = self.create_publisher(Odometry, VEHICLE_ODOM.ros_name, qos_of(VEHICLE_ODOM))
         self.pub_truth = None
         if cfg.publish_ground_truth:
-            self.pub_truth = self.create_publisher(VehicleState, VEHICLE_GROUND_TRUTH.name,
+            self.pub_truth = self.create_publisher(VehicleState, VEHICLE_GROUND_TRUTH.ros_name,
                                                    qos_of(VEHICLE_GROUND_TRUTH))
             self._truth_msg = VehicleState()
             self._truth_msg.header.frame_id = "map"
-        self.pub_clock = self.create_publisher(Clock, CLOCK.name, qos_of(CLOCK))
-        self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+        self.pub_clock = self.create_publisher(Clock, CLOCK.ros_name, qos_of(CLOCK))
+        self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                              qos_of(REFERENCE_TRAJECTORY))
-        self.pub_path = self.create_publisher(Path, REFERENCE_PATH.name, qos_of(REFERENCE_PATH))
-        self.pub_status = self.create_publisher(String, RUN_STATUS.name, qos_of(RUN_STATUS))
+        self.pub_path = self.create_publisher(Path, REFERENCE_PATH.ros_name, qos_of(REFERENCE_PATH))
+        self.pub_status = self.create_publisher(String, RUN_STATUS.ros_name, qos_of(RUN_STATUS))
         # Per-step messages are built once and refilled: every field is set before each
         # publish (which serialises at once), and Odometry's constructor alone costs ~40 µs.
         self._state_msg = VehicleState()
@@ -221,8 +221,9 @@ class PlantNode(Node):
         self._odom_msg = Odometry()
         self._odom_msg.header = self._state_msg.header
         self._odom_msg.child_frame_id = "base_link"
-        self.create_subscription(MpcCommand, MPC_COMMAND.name, self._on_mpc, qos_of(MPC_COMMAND))
-        self.create_subscription(WheelTorques, WHEEL_TORQUES.name, self._on_torques,
+        self.create_subscription(MpcCommand, MPC_COMMAND.ros_name, self._on_mpc,
+                                 qos_of(MPC_COMMAND))
+        self.create_subscription(WheelTorques, WHEEL_TORQUES.ros_name, self._on_torques,
                                  qos_of(WHEEL_TORQUES))
 
         log.info(f"scenario '{self.scenario.name}': {self.scenario.summary()}")

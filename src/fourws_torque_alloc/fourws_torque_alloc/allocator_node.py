@@ -90,17 +90,18 @@ class AllocatorNode(Node):
         self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
         self.health = NodeHealth(self)
         self._match_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
-        self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.name, qos_of(WHEEL_TORQUES))
+        self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.ros_name,
+                                         qos_of(WHEEL_TORQUES))
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
-        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  qos_of(REFERENCE_TRAJECTORY))
-        self.create_subscription(VehicleState, VEHICLE_STATE.name,
+        self.create_subscription(VehicleState, VEHICLE_STATE.ros_name,
                                  self.health.guard(VEHICLE_STATE.name, self._on_state),
                                  LATEST_QOS)
-        self.create_subscription(DriveCommand, DRIVE_COMMAND.name,
+        self.create_subscription(DriveCommand, DRIVE_COMMAND.ros_name,
                                  lambda m: self._on_input(self.drives, m), qos_of(DRIVE_COMMAND))
-        self.create_subscription(MpcCommand, MPC_COMMAND.name,
+        self.create_subscription(MpcCommand, MPC_COMMAND.ros_name,
                                  lambda m: self._on_input(self.mpcs, m), qos_of(MPC_COMMAND))
         self.get_logger().info(f"allocation method '{self.params.config.method}'")
 

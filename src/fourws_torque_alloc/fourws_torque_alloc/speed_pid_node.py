@@ -39,9 +39,10 @@ class SpeedPidNode(Node):
         self.prev_ns: int | None = None
         self.cached: DriveCommand | None = None
         self.health = NodeHealth(self)
-        self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.name, qos_of(DRIVE_COMMAND))
+        self.pub = self.create_publisher(DriveCommand, DRIVE_COMMAND.ros_name,
+                                         qos_of(DRIVE_COMMAND))
         self._cmd_msg = DriveCommand()  # refilled whole every step; also the cached answer
-        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.name,
+        self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  qos_of(REFERENCE_TRAJECTORY))
         self.state_input = StateInput(

@@ -152,17 +152,23 @@ class RunData:
 def read_run(path: str | Path) -> RunData:
     """Decode a run folder (``bag/`` inside), a bag folder or a bare ``.mcap`` into arrays.
 
-    Raises :class:`BagError` naming the file for a missing, truncated or corrupt bag.
+    A bag recorded in a namespace is read by the topic table's names (``/car1/vehicle/state``
+    as ``/vehicle/state``). Raises :class:`BagError` naming the file for a missing, truncated
+    or corrupt bag.
     """
     with McapBag(path) as bag:
-        counts = {t: c.message_count for t, c in bag.channels.items()}
+        # a run recorded in a namespace (/car1/vehicle/state) is read by the table's names
+        ns = topics.namespace_of(bag.channels)
+        recorded = {topics.graph_name(t, ns): t for t in bag.channels}
+        counts = {g: bag.channels[t].message_count for g, t in recorded.items()}
         per: dict[str, list[tuple[int, Any]]] = {t: [] for t in STEP_TOPICS}
         reference = None
         status_text = None
         rejections: dict[str, dict[str, int]] = {}
-        wanted = [t for t in (*STEP_TOPICS, REFERENCE, STATUS, DIAGNOSTICS)
-                  if t in bag.channels]
-        for topic, log_ns, msg in bag.decoded(wanted):
+        wanted = [recorded[t] for t in (*STEP_TOPICS, REFERENCE, STATUS, DIAGNOSTICS)
+                  if t in recorded]
+        for name, log_ns, msg in bag.decoded(wanted):
+            topic = topics.graph_name(name, ns)
             if topic in per:
                 stamp = _stamp_of(msg)
                 if stamp is not None:
