@@ -4,10 +4,11 @@ Subscribes to each topic in ``topics`` (graph topics by the table's names,
 ``/vehicle/state``; resolved in the recorder's namespace, so ``-r __ns:=/car1`` records
 ``/car1/vehicle/state``, as the bag then names it) with ``raw=True`` (no decode, no
 re-encode) and the QoS its publisher offers (the topic table's QoS kind,
-``fourws_common.topics``: control per step, latched for ``/reference/*`` and ``/run/status``, clock for ``/clock``, diagnostics for
-``/diagnostics``), and appends every message to
-``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`: ``log_time`` = wall receive
-time (ns), ``publish_time`` = header stamp (receive time for ``/run/status``).
+``fourws_common.topics``: control per step, latched for ``/reference/*`` and
+``/run/status``, clock for ``/clock``, diagnostics for ``/diagnostics``), and appends every
+message to ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`:
+``log_time`` = wall receive time (ns), ``publish_time`` = header stamp (receive time for
+``/run/status``).
 
 Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
 messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten with the
