@@ -13,6 +13,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
         *[
             ("share/" + PACKAGE + "/" + d, glob(d + "/*.yaml"))
             for d in sorted({p.rsplit("/", 1)[0] for p in glob("config/**/*.yaml", recursive=True)})

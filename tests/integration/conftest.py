@@ -39,6 +39,20 @@ def pid_alive(pid: int) -> bool:
     return state != "Z"
 
 
+def cut_scenario(folder: Path, end_x_m: float) -> Path:
+    """dlc_60_mu05 cut at ``end_x_m`` (a YAML in ``folder``): a short run of the real scenario."""
+    import yaml
+
+    from fourws_common.resources import config_dir
+
+    spec = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml")
+                          .read_text())
+    spec.update(name=f"dlc_60_to_{end_x_m:.0f}m", end_x_m=end_x_m, duration_s=15.0)
+    path = folder / f"dlc_60_to_{end_x_m:.0f}m.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
 def script_node(script: str, name: str) -> dict:
     """NodeSpec kwargs for one of the small test programs in tests/integration/nodes/."""
     return {"name": name, "package": "", "executable": "",

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import cut_scenario
 from diagnostic_msgs.msg import DiagnosticArray
 
 from fourws_bringup import runner
@@ -42,13 +43,7 @@ CONTROLLER = "improved"
 
 
 def _cut(tmp_path: Path, end_x_m: float) -> Path:
-    """dlc_60_mu05 cut at ``end_x_m``."""
-    spec = yaml.safe_load((config_dir("fourws_sim") / "scenarios" / "dlc_60_mu05.yaml")
-                          .read_text())
-    spec.update(name=f"dlc_60_to_{end_x_m:.0f}m", end_x_m=end_x_m, duration_s=15.0)
-    path = tmp_path / f"dlc_60_to_{end_x_m:.0f}m.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    return cut_scenario(tmp_path, end_x_m)
 
 
 @pytest.fixture

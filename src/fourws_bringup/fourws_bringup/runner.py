@@ -175,7 +175,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     # have matched every subscriber of the graph, the recorder among them. The recorder joins
     # last and cannot get a volatile first message again (the control chain can: the plant
     # republishes a waiting state and the controllers answer it from their caches).
-    waits: dict[str, dict] = {"mpc_node": {}, "speed_pid_node": {}, "allocator_node": {}}
+    waits: dict[str, dict] = {}
     if bag_dir is not None and mode == "lockstep":
         waits = {
             # mpc_command: plant, allocator, recorder; mpc_diagnostics: recorder
@@ -183,28 +183,14 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
             "speed_pid_node": {"wait_for_subscribers": 2},   # drive_command: allocator, rec.
             "allocator_node": {"wait_for_subscribers": 2},   # wheel_torques: plant, recorder
         }
-    specs = [
-        NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
-                 parameters=plant_params, end_codes=RUN_END_CODES),
-        NodeSpec("mpc_node", "fourws_mpc", "mpc_node", params_files=files("mpc_node"),
-                 parameters={**bench["mpc_node"], "sync": sync, **waits["mpc_node"]}),
-        NodeSpec("speed_pid_node", "fourws_torque_alloc", "speed_pid_node",
-                 params_files=files("speed_pid_node"),
-                 parameters={"sync": sync, **waits["speed_pid_node"]}),
-        NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
-                 params_files=files("allocator_node"),
-                 parameters={**bench["allocator_node"], "sync": sync,
-                             **waits["allocator_node"]}),
-    ]
+    specs = [NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
+                      parameters=plant_params, end_codes=RUN_END_CODES),
+             *_control_nodes(controller, sync, bench, waits)]
     for spec in specs:
         spec.namespace = normalise_namespace(namespace)
         if use_sim_time:
             spec.parameters["use_sim_time"] = True
-    layout = COMPOSE_LAYOUTS[compose]
-    if layout is not None:
-        name, hosted = layout
-        inside = [s for s in specs if s.name in hosted]
-        specs = [s for s in specs if s.name not in hosted] + [NodeSpec.compose(name, inside)]
+    specs = _layout(specs, compose)
     if bag_dir is not None:
         # The recorder is off the control chain (it buffers and writes chunks), so it yields
         # the CPU to the nodes the next step waits on: on 2 cores this cut the median step
@@ -217,6 +203,54 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                                           "topics": recorded_topics(condition)},
                               nice=RECORDER_NICE, namespace=namespace))
     return specs
+
+
+#: The control stack: what a user puts on their own plant or simulator.
+CONTROL_NODES = ("mpc_node", "speed_pid_node", "allocator_node")
+
+
+def _control_nodes(controller: str, sync: str, bench: dict[str, dict],
+                   waits: dict[str, dict]) -> list[NodeSpec]:
+    """MPC, speed PID and allocator, each with its package YAML and the preset."""
+    def spec(name: str, package: str, extra: dict) -> NodeSpec:
+        return NodeSpec(name, package, name,
+                        params_files=[str(f) for f in params_files(name, controller)],
+                        parameters={**extra, "sync": sync, **waits.get(name, {})})
+
+    return [spec("mpc_node", "fourws_mpc", bench["mpc_node"]),
+            spec("speed_pid_node", "fourws_torque_alloc", {}),
+            spec("allocator_node", "fourws_torque_alloc", bench["allocator_node"])]
+
+
+def _layout(specs: list[NodeSpec], compose: str) -> list[NodeSpec]:
+    """``specs`` in the processes of a :data:`COMPOSE_LAYOUTS` layout."""
+    layout = COMPOSE_LAYOUTS[compose]
+    if layout is None:
+        return specs
+    name, hosted = layout
+    inside = [s for s in specs if s.name in hosted]
+    return [s for s in specs if s.name not in hosted] + [NodeSpec.compose(name, inside)]
+
+
+def control_specs(controller: str, sync: str = "latest", *, compose: str = "none",
+                  use_sim_time: bool = False, condition: Condition = IDEAL,
+                  namespace: str = "") -> list[NodeSpec]:
+    """The control stack alone (:data:`CONTROL_NODES`), for a user's own plant or simulator:
+    the same nodes and parameters as in :func:`graph_specs`. ``sync``: ``latest`` (answer
+    the newest state, for a plant on its own clock) or ``lockstep`` (answer every state,
+    for a plant that waits for the commands); ``compose``: ``none`` or ``control``."""
+    if compose not in ("none", "control"):
+        raise RunError(f"compose layout '{compose}' is not one of ['control', 'none'] for the "
+                       "control stack alone")
+    if sync not in ("latest", "lockstep"):
+        raise RunError(f"sync '{sync}' is not one of ['latest', 'lockstep']")
+    controller_preset(controller)
+    specs = _control_nodes(controller, sync, node_parameters(condition), {})
+    for spec in specs:
+        spec.namespace = normalise_namespace(namespace)
+        if use_sim_time:
+            spec.parameters["use_sim_time"] = True
+    return _layout(specs, compose)
 
 
 def recorded_topics(condition: Condition) -> list[str]:

@@ -146,23 +146,30 @@ class NodeSpec:
                    end_codes=frozenset().union(*(s.end_codes for s in specs)),
                    namespace=specs[0].namespace)
 
+    def program_arguments(self) -> list[str]:
+        """The arguments before ``--ros-args``: a container's ``--nodes`` list."""
+        return ["--nodes", ",".join(self.hosts)] if self.hosts else []
+
+    def ros_arguments(self) -> list[str]:
+        """What follows ``--ros-args`` but the node name and namespace: log level,
+        parameter files, parameters (``-p``) and remappings, in that order."""
+        out = ["--log-level", self.log_level]
+        for f in self.params_files:
+            out += ["--params-file", str(f)]
+        for k, v in self.parameters.items():
+            out += ["-p", f"{k}:={_param_literal(v)}"]
+        for src, dst in self.remappings.items():
+            out += ["-r", f"{src}:={dst}"]
+        return out
+
     def command(self) -> list[str]:
         program = self.argv or [str(executable_path(self.package, self.executable))]
-        if self.hosts:
-            cmd = [*program, "--nodes", ",".join(self.hosts), "--ros-args",
-                   "--log-level", self.log_level]
-        else:
-            cmd = [*program, "--ros-args", "-r",
-                   f"__node:={self.name}", "--log-level", self.log_level]
+        cmd = [*program, *self.program_arguments(), "--ros-args"]
+        if not self.hosts:
+            cmd += ["-r", f"__node:={self.name}"]
         if self.namespace != "/":
             cmd += ["-r", f"__ns:={self.namespace}"]
-        for f in self.params_files:
-            cmd += ["--params-file", str(f)]
-        for k, v in self.parameters.items():
-            cmd += ["-p", f"{k}:={_param_literal(v)}"]
-        for src, dst in self.remappings.items():
-            cmd += ["-r", f"{src}:={dst}"]
-        return cmd + list(self.extra_args)
+        return cmd + self.ros_arguments() + list(self.extra_args)
 
 
 def normalise_namespace(ns: str) -> str:

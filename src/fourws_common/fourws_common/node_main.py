@@ -114,6 +114,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         print(f"[fatal] {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
         code = 1
     finally:
+        # Stopping now: a further SIGINT has nothing left to ask. Ignored, it cannot kill the
+        # process while it closes (Python resets its own handlers to the default while the
+        # interpreter finalises; ``ros2 launch`` sends SIGINT again to every process still
+        # running after a Ctrl-C, which killed a node with -2). SIGTERM still ends it.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         for node in nodes:
             code = code or getattr(node, "exit_code", 0) or 0
             node.destroy_node()
