@@ -205,3 +205,20 @@ def test_the_control_stack_alone_drives_a_plant_in_its_namespace(ros2_env, domai
     assert "has died" not in log and "Traceback" not in log, log[-4000:]
     for node in ("mpc_node", "speed_pid_node", "allocator_node"):
         assert f"[{node}-" in log, node
+
+
+def test_ros2_param_describe_shows_the_choices_of_a_string_parameter(ros2_env, domain_id,
+                                                                     graph):
+    """String choices are in the descriptor's additional_constraints, which ``ros2 param
+    describe`` prints as "Constraints"; numeric ranges as the allowed range."""
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml")])])
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    r = subprocess.run(["bash", "-c", f'source "{ros2_env}" && ros2 param describe /mpc_node '
+                        "weights_mode np_max"], env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    text = r.stdout
+    assert "Constraints:" in text and "fixed" in text and "fuzzy" in text, text
+    assert "Min value:" in text and "Max value:" in text, text

@@ -40,6 +40,8 @@ def _descriptor(f: dataclasses.Field) -> ParameterDescriptor:
     if choices:
         text += f" one of {list(choices)}"
     desc = ParameterDescriptor(description=text)
+    if choices:  # shown by ``ros2 param describe`` as "Constraints:"
+        desc.additional_constraints = "one of: " + ", ".join(str(c) for c in choices)
     lo, hi = meta.get("lo"), meta.get("hi")
     if lo is not None and hi is not None and not isinstance(f.default, tuple | bool):
         if isinstance(f.default, int):
