@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from fourws_bringup.container import NODES, node_factories, parse_nodes
@@ -64,9 +66,17 @@ def test_a_plain_spec_keeps_its_node_name_remap():
 def test_compose_refuses_what_a_container_cannot_host():
     with pytest.raises(ValueError, match="at least one node"):
         NodeSpec.compose("c", [])
+    # a remapping applies to the whole process: only one every hosted node shares
     odd = NodeSpec("mpc_node", "fourws_mpc", "mpc_node", remappings={"/a": "/b"})
     with pytest.raises(ValueError, match="mpc_node"):
-        NodeSpec.compose("c", [odd])
+        NodeSpec.compose("c", [*_specs()[:1], odd])
+    shared = [dataclasses.replace(s, remappings={"/clock": "/car1/clock"}, namespace="car1")
+              for s in _specs()]
+    both = NodeSpec.compose("c", shared)
+    assert both.remappings == {"/clock": "/car1/clock"} and both.namespace == "/car1"
+    assert "/clock:=/car1/clock" in both.command() and "__ns:=/car1" in both.command()
+    with pytest.raises(ValueError, match="namespace"):
+        NodeSpec.compose("c", [shared[0], dataclasses.replace(shared[1], namespace="car2")])
     inner = NodeSpec.compose("inner", _specs()[:1])
     with pytest.raises(ValueError, match="inner"):
         NodeSpec.compose("outer", [inner])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
-from fourws_common.topics import RUN_STATUS, VEHICLE_GROUND_TRUTH, VEHICLE_STATE
+from fourws_common.topics import CLOCK, RUN_STATUS, VEHICLE_GROUND_TRUTH, VEHICLE_STATE
 
 from .core.conditions import IDEAL, Condition, node_parameters
 from .core.configs import controller_preset_path, node_values, params_files
@@ -186,10 +186,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     specs = [NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
                       parameters=plant_params, end_codes=RUN_END_CODES),
              *_control_nodes(controller, sync, bench, waits)]
-    for spec in specs:
-        spec.namespace = normalise_namespace(namespace)
-        if use_sim_time:
-            spec.parameters["use_sim_time"] = True
+    _place(specs, namespace, use_sim_time)
     specs = _layout(specs, compose)
     if bag_dir is not None:
         # The recorder is off the control chain (it buffers and writes chunks), so it yields
@@ -199,9 +196,13 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                               params_files=files("recorder_node"),
                               parameters={"output_dir": str(bag_dir),
                                           "start_gate_topic": VEHICLE_STATE.name,
-                                          "use_sim_time": use_sim_time,
+                                          # rosbag2's --use-sim-time: in lockstep the
+                                          # bag's log times are the simulated ones, so
+                                          # ros2 bag play paces it at the simulated rate
+                                          "use_sim_time": use_sim_time or mode == "lockstep",
                                           "topics": recorded_topics(condition)},
-                              nice=RECORDER_NICE, namespace=namespace))
+                              nice=RECORDER_NICE, namespace=namespace,
+                              remappings=clock_remap(namespace)))
     return specs
 
 
@@ -246,11 +247,29 @@ def control_specs(controller: str, sync: str = "latest", *, compose: str = "none
         raise RunError(f"sync '{sync}' is not one of ['latest', 'lockstep']")
     controller_preset(controller)
     specs = _control_nodes(controller, sync, node_parameters(condition), {})
+    _place(specs, namespace, use_sim_time, own_clock=False)  # the user's plant has the clock
+    return _layout(specs, compose)
+
+
+def clock_remap(namespace: str) -> dict[str, str]:
+    """The remapping that gives a simulation in ``namespace`` its own clock: ``/clock`` ->
+    ``/ns/clock`` (none in the root namespace). Nodes publish and read the global /clock, as
+    ROS expects; two simulated cars in one domain would mix their times on it, so a run in a
+    namespace moves its clock with it (a user's own car has no simulated clock)."""
+    ns = normalise_namespace(namespace)
+    return {} if ns == "/" else {CLOCK.name: f"{ns}{CLOCK.name}"}
+
+
+def _place(specs: list[NodeSpec], namespace: str, use_sim_time: bool,
+           own_clock: bool = True) -> None:
+    """Every spec in ``namespace`` (with the namespace's own clock, :func:`clock_remap`, for
+    a simulation), on sim time if asked."""
     for spec in specs:
         spec.namespace = normalise_namespace(namespace)
+        if own_clock:
+            spec.remappings.update(clock_remap(namespace))
         if use_sim_time:
             spec.parameters["use_sim_time"] = True
-    return _layout(specs, compose)
 
 
 def recorded_topics(condition: Condition) -> list[str]:

@@ -186,23 +186,23 @@ LATENCY_STAGES = (
 
 
 def step_latencies_ms(run) -> dict[str, dict[str, float]]:
-    """Where each step's wall time goes, from the recorder's receive times (``log_ns``):
-    per stage of the lockstep chain (state → MPC command → wheel torques → next state), the
-    median and 90th percentile in ms over the steps that have both ends. The recorder's own
-    delivery delay cancels in each difference up to its jitter. Empty for a bag without
-    receive times or with fewer than two steps."""
+    """Where each step's wall time goes, from the messages' wall times (``wall_ns``: the
+    publishers' send times, or the recorder's receive times in older bags): per stage of the
+    lockstep chain (state → MPC command → wheel torques → next state), the median and 90th
+    percentile in ms over the steps that have both ends. Empty for a bag without them or
+    with fewer than two steps."""
     out: dict[str, dict[str, float]] = {}
     for name, src, dst, next_step in LATENCY_STAGES:
         a, b = getattr(run, src), getattr(run, dst)
-        if len(a.get("log_ns", ())) < 2 or len(b.get("log_ns", ())) < 2:
+        if len(a.get("wall_ns", ())) < 2 or len(b.get("wall_ns", ())) < 2:
             continue
         stamps_a = np.asarray(a["stamp_ns"], dtype=np.int64)
         want = stamps_a[1:] if next_step else stamps_a
-        start = a["log_ns"][:-1] if next_step else a["log_ns"]
+        start = a["wall_ns"][:-1] if next_step else a["wall_ns"]
         idx = np.searchsorted(b["stamp_ns"], want)
         ok = idx < len(b["stamp_ns"])
         ok[ok] = b["stamp_ns"][idx[ok]] == want[ok]
-        d = (b["log_ns"][idx[ok]] - start[ok]) * 1e-6
+        d = (b["wall_ns"][idx[ok]] - start[ok]) * 1e-6
         if len(d):
             out[name] = {"p50": float(np.median(d)), "p90": float(np.percentile(d, 90))}
     return out

@@ -131,10 +131,12 @@ class NodeSpec:
         """
         if not specs:
             raise ValueError(f"{name}: a container needs at least one node")
-        bad = [s.name for s in specs if s.hosts or s.argv or s.remappings or s.extra_args]
+        bad = [s.name for s in specs if s.hosts or s.argv or s.extra_args
+               or s.remappings != specs[0].remappings]
         if bad:
             raise ValueError(f"{name}: cannot host {bad} (containers, custom programs, "
-                             "remappings and extra arguments stay processes of their own)")
+                             "extra arguments and remappings not shared by every hosted node "
+                             "stay processes of their own)")
         spaces = {s.namespace for s in specs}
         if len(spaces) > 1:
             raise ValueError(f"{name}: one container has one namespace, got {sorted(spaces)}")
@@ -144,7 +146,7 @@ class NodeSpec:
                    log_level=specs[0].log_level, nice=min(s.nice for s in specs),
                    hosts=tuple(s.name for s in specs),
                    end_codes=frozenset().union(*(s.end_codes for s in specs)),
-                   namespace=specs[0].namespace)
+                   namespace=specs[0].namespace, remappings=dict(specs[0].remappings))
 
     def program_arguments(self) -> list[str]:
         """The arguments before ``--ros-args``: a container's ``--nodes`` list."""

@@ -130,6 +130,16 @@ class McapBag:
             self._fh.close()
             raise BagError(f"{self.path}: MCAP file without a summary section")
         self.summary = summary
+        #: custom_data of the bag's rosbag2 metadata copy inside the MCAP ({} if none)
+        self.custom_data: dict[str, str] = {}
+        try:
+            for rec in self._reader.iter_metadata():
+                if rec.name == "rosbag2":
+                    info = yaml.safe_load(rec.metadata.get("serialized_metadata", "")) or {}
+                    self.custom_data = {str(k): str(v) for k, v in
+                                        (info.get("custom_data") or {}).items()}
+        except (*read_errors(), yaml.YAMLError, AttributeError):
+            self.custom_data = {}
         counts = summary.statistics.channel_message_counts if summary.statistics else {}
         self.channels: dict[str, ChannelInfo] = {}
         for cid, ch in summary.channels.items():
@@ -160,8 +170,10 @@ class McapBag:
         except read_errors() as exc:
             raise BagError(f"{self.path}: corrupt data: {exc}") from exc
 
-    def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[str, int, Any]]:
-        """``(topic, log_time_ns, message)`` decoded with mcap_ros2's CDR decoder."""
+    def decoded(self, topics: Iterable[str] | None = None
+                ) -> Iterator[tuple[str, int, int, Any]]:
+        """``(topic, log_time_ns, publish_time_ns, message)`` decoded with mcap_ros2's CDR
+        decoder."""
         from mcap_ros2.decoder import DecoderFactory
 
         factory = DecoderFactory()
@@ -183,7 +195,7 @@ class McapBag:
                 except read_errors() as exc:
                     raise BagError(f"{self.path}: cannot decode a message on {channel.topic} "
                                    f"at log time {msg.log_time}: {exc}") from exc
-                yield channel.topic, msg.log_time, value
+                yield channel.topic, msg.log_time, msg.publish_time, value
         except BagError:
             raise
         except read_errors() as exc:

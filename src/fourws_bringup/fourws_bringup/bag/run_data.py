@@ -69,22 +69,25 @@ def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, in
     return kept, len(stamped) - len(kept)
 
 
-def _columns(stamped: list[tuple[int, int, Any]]) -> dict[str, np.ndarray]:
-    """Per-step columns from ``(stamp_ns, log_time_ns, msg)``: the first message of each
-    stamp, sorted by stamp; ``log_ns`` is when the recorder received it."""
-    first: dict[int, tuple[int, Any]] = {}
-    for stamp, log_ns, msg in stamped:
+def _columns(stamped: list[tuple[int, int, int, Any]]) -> dict[str, np.ndarray]:
+    """Per-step columns from ``(stamp_ns, log_time_ns, wall_ns, msg)``: the first message of
+    each stamp, sorted by stamp; ``log_ns`` is when the recorder received it (its clock),
+    ``wall_ns`` the wall time the step went out (see :class:`RunData`)."""
+    first: dict[int, tuple[int, int, Any]] = {}
+    for stamp, log_ns, wall_ns, msg in stamped:
         if stamp not in first:
-            first[stamp] = (log_ns, msg)
+            first[stamp] = (log_ns, wall_ns, msg)
     stamps = sorted(first)
     out: dict[str, np.ndarray] = {"stamp_ns": np.array(stamps, dtype=np.int64),
                                   "t_s": np.array(stamps, dtype=np.int64) * 1e-9,
                                   "log_ns": np.array([first[s][0] for s in stamps],
-                                                     dtype=np.int64)}
+                                                     dtype=np.int64),
+                                  "wall_ns": np.array([first[s][1] for s in stamps],
+                                                      dtype=np.int64)}
     if not stamps:
         return out
-    for name in _fields(first[stamps[0]][1]):
-        out[name] = _column([getattr(first[s][1], name) for s in stamps])
+    for name in _fields(first[stamps[0]][2]):
+        out[name] = _column([getattr(first[s][2], name) for s in stamps])
     return out
 
 
@@ -102,7 +105,10 @@ class RunData:
     """A recorded run as per-step numpy arrays (SI units, as on the wire).
 
     Each per-topic dict has ``stamp_ns`` (int64), ``t_s``, ``log_ns`` (int64, the recorder's
-    receive time, wall clock) and one array per message field
+    receive time on its clock: simulated in a lockstep run of this version, wall in older
+    bags), ``wall_ns`` (int64: the publisher's send time where the bag records it,
+    ``custom_data.fourws_publish_time: send_time``, else the receive time; what step
+    latencies are measured on) and one array per message field
     (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one row per header
     stamp (the first message of each stamp), sorted by stamp. A topic absent from the bag
     gives a dict with empty ``stamp_ns``/``t_s``/``log_ns`` only.
@@ -167,12 +173,13 @@ def read_run(path: str | Path) -> RunData:
         rejections: dict[str, dict[str, int]] = {}
         wanted = [recorded[t] for t in (*STEP_TOPICS, REFERENCE, STATUS, DIAGNOSTICS)
                   if t in recorded]
-        for name, log_ns, msg in bag.decoded(wanted):
+        sent = bag.custom_data.get("fourws_publish_time") == "send_time"
+        for name, log_ns, pub_ns, msg in bag.decoded(wanted):
             topic = topics.graph_name(name, ns)
             if topic in per:
                 stamp = _stamp_of(msg)
                 if stamp is not None:
-                    per[topic].append((stamp, log_ns, msg))
+                    per[topic].append((stamp, log_ns, pub_ns if sent else log_ns, msg))
             elif topic == REFERENCE:
                 reference = msg
             elif topic == STATUS:

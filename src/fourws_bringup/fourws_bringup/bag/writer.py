@@ -1,9 +1,13 @@
 """Write a rosbag2-layout MCAP bag chunk by chunk: :class:`BagWriter`, the recorder's storage.
 
-A message's ``log_time`` is the wall time it was received; its ``publish_time`` is its header
-stamp (or ``builtin_interfaces/Time`` first field, as in ``/clock``) read straight from the
-CDR bytes, otherwise the receive time. Schemas carry the full ``ros2msg`` text and channels
-``offered_qos_profiles`` and ``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`).
+Times follow rosbag2: a message's ``log_time`` is when the recorder received it on its node
+clock (simulated time under ``use_sim_time``, so ``ros2 bag play`` paces a lockstep run at
+the simulated rate), its ``publish_time`` when the publisher sent it and its ``sequence``
+the publisher's sequence number, both as DDS reports them (the recorder passes them). A
+caller that has no send time gets the header stamp (or a ``builtin_interfaces/Time`` first
+field, as in ``/clock``) read straight from the CDR bytes, else the receive time. Schemas
+carry the full ``ros2msg`` text and channels ``offered_qos_profiles`` and
+``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`).
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import yaml
@@ -46,7 +50,8 @@ class BagWriter:
 
     def __init__(self, folder: str | Path, topics: Iterable[TopicInfo], *,
                  chunk_size_bytes: int = 262144, compression: str = "zstd",
-                 library: str = "fourws recorder") -> None:
+                 library: str = "fourws recorder",
+                 custom_data: Mapping[str, str] | None = None) -> None:
         from mcap.writer import LIBRARY_IDENTIFIER, Writer
 
         self.folder = Path(folder)
@@ -60,6 +65,7 @@ class BagWriter:
                               compression=compression_type(compression))
         self._writer.start(profile="ros2", library=f"{library}; {LIBRARY_IDENTIFIER}")
         self.compression = compression
+        self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self.records: dict[str, TopicRecord] = {}
         self._channels: dict[str, int] = {}
         self._stamped: dict[str, bool] = {}
@@ -99,10 +105,11 @@ class BagWriter:
         return self._stamped[topic]
 
     def write(self, topic: str, data: bytes, log_time_ns: int,
-              publish_time_ns: int | None = None) -> bool:
+              publish_time_ns: int | None = None, sequence: int | None = None) -> bool:
         """Append one serialized message. Returns True when a chunk was completed (and flushed).
 
-        ``publish_time_ns`` defaults to the message's stamp if it has one, else ``log_time_ns``.
+        ``publish_time_ns`` defaults to the message's stamp if it has one, else ``log_time_ns``;
+        ``sequence`` to the count of the topic's messages written.
         """
         if self.closed:
             raise BagError(f"{self.path}: write after close")
@@ -110,9 +117,10 @@ class BagWriter:
             stamp = cdr_stamp_ns(data) if self._stamped[topic] else None
             publish_time_ns = log_time_ns if stamp is None or stamp < 0 else stamp
         self._seq[topic] += 1
+        seq = self._seq[topic] if sequence is None else int(sequence)
         self._writer.add_message(channel_id=self._channels[topic], log_time=int(log_time_ns),
                                  data=bytes(data), publish_time=int(publish_time_ns),
-                                 sequence=self._seq[topic] & 0xFFFFFFFF)
+                                 sequence=seq & 0xFFFFFFFF)
         self.records[topic].message_count += 1
         self._first_ns = log_time_ns if self._first_ns is None else min(self._first_ns,
                                                                          log_time_ns)
@@ -141,9 +149,14 @@ class BagWriter:
         topics = [dataclasses.replace(r, message_count=counts.get(k, 0))
                   for k, r in self.records.items()]
         write_metadata(self.folder, relative_file_paths=[self.file_name], topics=topics,
-                       starting_time_ns=first or 0, duration_ns=(last - first) if first else 0,
-                       custom_data={"fourws_state": state,
-                                    "fourws_chunk_compression": self.compression})
+                       starting_time_ns=first or 0,
+                       duration_ns=(last - first) if first is not None else 0,
+                       custom_data=self._custom(state))
+
+    def _custom(self, state: str) -> dict[str, str]:
+        """custom_data of metadata.yaml, and of its copy inside the MCAP (the same)."""
+        return {**self.custom_data, "fourws_state": state,
+                "fourws_chunk_compression": self.compression}
 
     def close(self) -> None:
         """Finish the MCAP file (last chunk, summary, footer) and write final metadata.yaml."""
@@ -155,7 +168,8 @@ class BagWriter:
         topics = [dataclasses.replace(r, message_count=counts[k]) for k, r in self.records.items()]
         info = build_metadata(relative_file_paths=[self.file_name], topics=topics,
                               starting_time_ns=first or 0,
-                              duration_ns=(last - first) if first else 0)
+                              duration_ns=(last - first) if first is not None else 0,
+                              custom_data=self._custom("complete"))
         self._writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(
             info, sort_keys=False, default_flow_style=False)})
         self._writer.finish()
