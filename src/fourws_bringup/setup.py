@@ -31,6 +31,7 @@ setup(
             "recorder_node = fourws_bringup.recorder_node:main",
             "replay_node = fourws_bringup.replay_node:main",
             "container = fourws_bringup.container:main",
+            "adapter_node = fourws_bringup.adapter_node:main",
         ],
     },
 )

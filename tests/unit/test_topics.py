@@ -47,8 +47,8 @@ def test_qos_kinds_keep_their_values():
 
 def test_every_graph_topic_is_named_typed_and_offers_a_kind_of_the_table():
     assert DEFAULT_TOPICS == (
-        "/clock", "/vehicle/state", "/vehicle/ground_truth", "/vehicle/odom",
-        "/reference/trajectory", "/reference/path",
+        "/clock", "/vehicle/state", "/vehicle/ground_truth", "/vehicle/odom", "/vehicle/imu",
+        "/vehicle/joint_states", "/reference/trajectory", "/reference/path",
         "/control/mpc_command", "/control/mpc_diagnostics", "/control/drive_command",
         "/control/wheel_torques", "/run/status", "/diagnostics")
     for name, t in TOPICS.items():
@@ -57,6 +57,24 @@ def test_every_graph_topic_is_named_typed_and_offers_a_kind_of_the_table():
         assert t.qos in QOS_KINDS and t.qos != "latest", name  # latest: subscriber side only
         assert t.reason
         assert offered_qos(name) == QOS_KINDS[t.qos].as_dict() == topic_info(name).qos
+
+
+def test_nodes_use_relative_names_but_the_clock_and_diagnostics_stay_global():
+    from fourws_common.topics import graph_name, namespace_of
+
+    for name, t in TOPICS.items():
+        if name in ("/clock", "/diagnostics"):
+            assert t.ros_name == name
+        else:
+            assert t.ros_name == name[1:] and not t.ros_name.startswith("/")
+    assert graph_name("/car1/vehicle/state", "/car1") == "/vehicle/state"
+    assert graph_name("/car1/vehicle/state", "car1") == "/vehicle/state"
+    assert graph_name("/vehicle/state", "/") == "/vehicle/state"
+    assert graph_name("/car1/extra", "/car1") == "/car1/extra"      # not a graph topic
+    assert graph_name("/diagnostics", "/car1") == "/diagnostics"
+    assert namespace_of(["/diagnostics", "/car1/vehicle/state"]) == "/car1"
+    assert namespace_of(["/a/b/vehicle/state"]) == "/a/b"
+    assert namespace_of(["/vehicle/state"]) == "/" == namespace_of([])
 
 
 def test_a_topic_outside_the_table_is_offered_control_qos():

@@ -27,13 +27,14 @@ from .runner import COMPOSE_LAYOUTS
 def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
                   mode: str = "lockstep", plots: bool = True, progress: bool = True,
                   compose: str = "none", condition: Condition = IDEAL,
-                  namespace: str = "", domain_id: int | None = None) -> dict:
+                  namespace: str = "", domain_id: int | None = None,
+                  via_adapter: bool = False) -> dict:
     """``fourws run``: one run over topics, then metrics.json and plots from its bag.
 
     ``compose``: the process layout (:func:`fourws_bringup.runner.graph_specs`), recorded in
     metrics.json; it changes the timing only, never a recorded value. ``condition``: the
     bench (``core.conditions``), recorded in metrics.json as ``condition`` and ``seed``.
-    ``namespace``, ``domain_id``: where the graph runs (:func:`~fourws_bringup.runner.run_graph`).
+    ``namespace``, ``domain_id``, ``via_adapter``: :func:`~fourws_bringup.runner.run_graph`.
     """
     from fourws_common.exit_codes import ExitCode
     from fourws_sim.core.scenario import load_scenario
@@ -51,7 +52,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
     outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
                         compose=compose, condition=condition, namespace=namespace,
-                        domain_id=domain_id)
+                        domain_id=domain_id, via_adapter=via_adapter)
     try:
         metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller)
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
@@ -64,6 +65,8 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     metrics["compose"] = compose
     if namespace.strip("/"):
         metrics["namespace"] = "/" + namespace.strip("/")
+    if via_adapter:
+        metrics["via_adapter"] = True
     metrics["condition"] = condition.name
     metrics["seed"] = condition.seed
     write_metrics(out_dir, metrics)
@@ -112,7 +115,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         metrics = run_and_score(args.scenario, args.controller, Path(args.out),
                                 force=args.force, mode=args.mode, plots=not args.no_plots,
                                 compose=args.compose, condition=condition,
-                                namespace=args.namespace, domain_id=args.domain_id)
+                                namespace=args.namespace, domain_id=args.domain_id,
+                                via_adapter=args.via_adapter)
     except (RunError, ValueError) as exc:
         print(f"fourws run: {exc}", file=sys.stderr)
         return 2
@@ -270,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "topics (e.g. car1); /clock and /diagnostics stay global")
     r.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID to run in "
                    "(default: a free one of this host, so parallel runs never meet)")
+    r.add_argument("--via-adapter", action="store_true", help="feed the controllers through "
+                   "adapter_node from standard messages (Odometry, Imu, JointState), as on "
+                   "another car or simulator")
     r.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("paper", help="run the paper's eight configurations and print Tables 6-8")

@@ -25,7 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_common.exit_codes import RUN_END_CODES, ExitCode
-from fourws_common.topics import CLOCK, RUN_STATUS, VEHICLE_GROUND_TRUTH, VEHICLE_STATE
+from fourws_common.topics import (
+    CLOCK,
+    RUN_STATUS,
+    VEHICLE_GROUND_TRUTH,
+    VEHICLE_IMU,
+    VEHICLE_JOINT_STATES,
+    VEHICLE_STATE,
+)
 
 from .core.conditions import IDEAL, Condition, node_parameters
 from .core.configs import controller_preset_path, node_values, params_files
@@ -142,7 +149,8 @@ def prepare_out_dir(out_dir: Path, force: bool, *,
 def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str = "lockstep",
                 extra_plant: dict | None = None, compose: str = "none",
                 status_file: Path | None = None, use_sim_time: bool = False,
-                condition: Condition = IDEAL, namespace: str = "") -> list[NodeSpec]:
+                condition: Condition = IDEAL, namespace: str = "",
+                via_adapter: bool = False) -> list[NodeSpec]:
     """The node list of a run: every node with its package YAML and the controller preset.
 
     ``compose`` (:data:`COMPOSE_LAYOUTS`) picks the processes: ``none``, one per node;
@@ -151,11 +159,18 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     the recorder always has a process of its own. ``status_file``: where the plant writes
     its final status; ``use_sim_time``: every node's clock follows /clock; ``condition``
     (``core.conditions``): the bench, as node parameters (``node_parameters``);
-    ``namespace``: every node's (its topics follow; ``/clock`` and ``/diagnostics`` stay
-    global), so several runs can share a domain.
+    ``namespace``: every node's (its topics follow; ``/diagnostics`` stays global, the
+    clock moves with the simulation, :func:`clock_remap`), so several runs can share a
+    domain. ``via_adapter``: the controllers get their state the way they would on another
+    car: the plant publishes standard messages (Odometry, Imu, JointState) and
+    ``adapter_node`` builds ``vehicle/state`` from them (the plant's own goes to
+    ``vehicle/state_direct``, which nothing reads).
     """
     if compose not in COMPOSE_LAYOUTS:
         raise RunError(f"compose layout '{compose}' is not one of {sorted(COMPOSE_LAYOUTS)}")
+    if via_adapter and compose == "all":
+        raise RunError("via_adapter: the plant's remapped state cannot share a container "
+                       "process with the controllers (use compose none or control)")
     controller_preset(controller)
 
     def files(node: str) -> list[str]:
@@ -186,6 +201,13 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     specs = [NodeSpec("plant_node", "fourws_sim", "plant_node", params_files=files("plant_node"),
                       parameters=plant_params, end_codes=RUN_END_CODES),
              *_control_nodes(controller, sync, bench, waits)]
+    if via_adapter:
+        plant_params.update(publish_standard_sensors=True, wait_for_subscribers=0)
+        specs[0].remappings[VEHICLE_STATE.ros_name] = VEHICLE_STATE.ros_name + "_direct"
+        specs.insert(1, NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
+                                 params_files=files("adapter_node"),
+                                 parameters={"wait_for_subscribers": subscribers,
+                                             "mu_nominal": float(condition.mu_nominal)}))
     _place(specs, namespace, use_sim_time)
     specs = _layout(specs, compose)
     if bag_dir is not None:
@@ -200,7 +222,8 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                                           # bag's log times are the simulated ones, so
                                           # ros2 bag play paces it at the simulated rate
                                           "use_sim_time": use_sim_time or mode == "lockstep",
-                                          "topics": recorded_topics(condition)},
+                                          "topics": recorded_topics(condition,
+                                                                    via_adapter)},
                               nice=RECORDER_NICE, namespace=namespace,
                               remappings=clock_remap(namespace)))
     return specs
@@ -272,13 +295,15 @@ def _place(specs: list[NodeSpec], namespace: str, use_sim_time: bool,
             spec.parameters["use_sim_time"] = True
 
 
-def recorded_topics(condition: Condition) -> list[str]:
+def recorded_topics(condition: Condition, via_adapter: bool = False) -> list[str]:
     """recorder.yaml's topics; /vehicle/ground_truth only where the plant publishes it (a
-    realistic condition), so the recorder's start gate never waits for a silent topic."""
+    realistic condition), /vehicle/imu and /vehicle/joint_states only on the adapter path,
+    so the recorder's start gate never waits for a silent topic."""
     topics = list(node_values("recorder_node")["topics"])
+    silent = set() if via_adapter else {VEHICLE_IMU.name, VEHICLE_JOINT_STATES.name}
     if not node_parameters(condition)["plant_node"].get("publish_ground_truth"):
-        topics = [t for t in topics if t != VEHICLE_GROUND_TRUTH.name]
-    return topics
+        silent.add(VEHICLE_GROUND_TRUTH.name)
+    return [t for t in topics if t not in silent]
 
 
 @dataclass
@@ -377,18 +402,18 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
               extra_plant: dict | None = None, compose: str = "none",
               use_sim_time: bool = False, condition: Condition = IDEAL,
               namespace: str = "", domain_id: int | None = None,
-              stream=sys.stderr) -> RunOutcome:
+              via_adapter: bool = False, stream=sys.stderr) -> RunOutcome:
     """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome.
 
-    ``namespace``: the graph's (:func:`graph_specs`); ``domain_id``: run in this ROS domain
-    (default: a free one of this host, leased for the run)."""
+    ``namespace``, ``via_adapter``: as in :func:`graph_specs`; ``domain_id``: run in this
+    ROS domain (default: a free one of this host, leased for the run)."""
     bag_dir = out_dir / "bag" if record else None
     status_file = out_dir / "logs" / "plant_status.json"
     with contextlib.suppress(FileNotFoundError):
         status_file.unlink()
     specs = graph_specs(scenario, controller, bag_dir, mode, extra_plant, compose,
                         status_file=status_file, use_sim_time=use_sim_time,
-                        condition=condition, namespace=namespace)
+                        condition=condition, namespace=namespace, via_adapter=via_adapter)
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)  # its process
     lease = DomainLease() if domain_id is None else None
     domain = lease.domain_id if lease is not None else int(domain_id)

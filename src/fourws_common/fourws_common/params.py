@@ -70,6 +70,12 @@ def check_field(cls: type, name: str, value: Any) -> Any:
         if choices and value not in choices:
             raise ValueError(f"{name}: '{value}' is not one of {list(choices)}")
         return value
+    elif isinstance(default, tuple) and default and all(isinstance(v, str) for v in default):
+        # a list of names (a string array parameter)
+        if not isinstance(value, list | tuple) or not all(
+                isinstance(v, str) and v for v in value):
+            raise ValueError(f"{name}: expected a list of non-empty strings, got {value!r}")
+        return tuple(value)
     elif isinstance(default, tuple):
         if not isinstance(value, list | tuple):
             raise ValueError(f"{name}: expected a list, got {value!r}")

@@ -96,6 +96,12 @@ VEHICLE_GROUND_TRUTH = Topic("/vehicle/ground_truth", "fourws_msgs/msg/VehicleSt
                              "sensed (a realistic condition): every metric is computed on it")
 VEHICLE_ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", "control",
                      "the same state as standard odometry, for standard tools")
+VEHICLE_IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", "control",
+                    "yaw rate and body accelerations as a car's IMU gives them (the plant with "
+                    "publish_standard_sensors; the adapter's input)")
+VEHICLE_JOINT_STATES = Topic("/vehicle/joint_states", "sensor_msgs/msg/JointState", "control",
+                             "road-wheel steer angles and wheel spin rates as joints (the plant "
+                             "with publish_standard_sensors; the adapter's input)")
 REFERENCE_TRAJECTORY = Topic("/reference/trajectory", "fourws_msgs/msg/ReferenceTrajectory",
                              "latched", "the scenario's reference for the MPC and speed PID, "
                              "once per run")
@@ -117,7 +123,8 @@ DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "diag
 
 #: The graph's topics by name, in the order a bag records them by default.
 TOPICS: dict[str, Topic] = {t.name: t for t in (
-    CLOCK, VEHICLE_STATE, VEHICLE_GROUND_TRUTH, VEHICLE_ODOM, REFERENCE_TRAJECTORY,
+    CLOCK, VEHICLE_STATE, VEHICLE_GROUND_TRUTH, VEHICLE_ODOM, VEHICLE_IMU,
+    VEHICLE_JOINT_STATES, REFERENCE_TRAJECTORY,
     REFERENCE_PATH, MPC_COMMAND,
     MPC_DIAGNOSTICS, DRIVE_COMMAND, WHEEL_TORQUES, RUN_STATUS, DIAGNOSTICS)}
 DEFAULT_TOPICS: tuple[str, ...] = tuple(TOPICS)

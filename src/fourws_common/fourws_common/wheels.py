@@ -21,3 +21,11 @@ class Wheel(IntEnum):
 
 WHEEL_SIDE = (1.0, -1.0, 1.0, -1.0)
 """+1 for the left wheels, −1 for the right wheels, in :class:`Wheel` order."""
+
+
+STEER_JOINTS = ("steer_front", "steer_rear")
+"""sensor_msgs/JointState names of the road-wheel steer angles (rad, left positive): the
+plant's ``/vehicle/joint_states`` and the adapter's default."""
+WHEEL_JOINTS = tuple(f"wheel_{w.name.lower()}" for w in Wheel)
+"""JointState names of the wheel spin joints (rad/s as ``velocity``), in :class:`Wheel` order."""
+JOINT_NAMES = (*STEER_JOINTS, *WHEEL_JOINTS)

@@ -64,6 +64,7 @@ from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
 
 from fourws_common.conversions import (
@@ -84,10 +85,13 @@ from fourws_common.topics import (
     REFERENCE_TRAJECTORY,
     RUN_STATUS,
     VEHICLE_GROUND_TRUTH,
+    VEHICLE_IMU,
+    VEHICLE_JOINT_STATES,
     VEHICLE_ODOM,
     VEHICLE_STATE,
     WHEEL_TORQUES,
 )
+from fourws_common.wheels import JOINT_NAMES
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
 from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, sensors_from_params
@@ -148,6 +152,11 @@ class PlantNodeConfig:
                                    "actuator); empty: none")
     publish_ground_truth: bool = param(False, "also publish the true state on "
                                        "/vehicle/ground_truth (realistic conditions)")
+    publish_standard_sensors: bool = param(False, "also publish the sensed state as a car's "
+                                           "standard messages: /vehicle/imu (sensor_msgs/Imu) "
+                                           "and /vehicle/joint_states (sensor_msgs/JointState; "
+                                           "/vehicle/odom is always published), for the "
+                                           "adapter node")
 
     def __post_init__(self) -> None:
         ratio = self.dt_s / self.substep_s
@@ -208,6 +217,15 @@ class PlantNode(Node):
                                                    qos_of(VEHICLE_GROUND_TRUTH))
             self._truth_msg = VehicleState()
             self._truth_msg.header.frame_id = "map"
+        self.pub_imu = self.pub_joints = None
+        if cfg.publish_standard_sensors:
+            self.pub_imu = self.create_publisher(Imu, VEHICLE_IMU.ros_name, qos_of(VEHICLE_IMU))
+            self.pub_joints = self.create_publisher(JointState, VEHICLE_JOINT_STATES.ros_name,
+                                                    qos_of(VEHICLE_JOINT_STATES))
+            self._imu_msg = Imu()
+            self._imu_msg.header.frame_id = "base_link"
+            self._joints_msg = JointState()
+            self._joints_msg.name = list(JOINT_NAMES)
         self.pub_clock = self.create_publisher(Clock, CLOCK.ros_name, qos_of(CLOCK))
         self.pub_ref = self.create_publisher(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                              qos_of(REFERENCE_TRAJECTORY))
@@ -499,6 +517,19 @@ class PlantNode(Node):
         odom.twist.twist.linear.x, odom.twist.twist.linear.y = o.vx, o.vy
         odom.twist.twist.angular.z = o.yaw_rate
         self.pub_odom.publish(odom)
+        if self.pub_imu is not None:
+            imu, joints = self._imu_msg, self._joints_msg
+            imu.header.stamp = joints.header.stamp = stamp
+            imu.angular_velocity.z = o.yaw_rate
+            imu.linear_acceleration.x, imu.linear_acceleration.y = o.ax, o.ay
+            # specific force of a level car: gravity (as an IMU measures it)
+            imu.linear_acceleration.z = self.scenario.vehicle.gravity_mps2
+            imu.orientation.z, imu.orientation.w = (odom.pose.pose.orientation.z,
+                                                    odom.pose.pose.orientation.w)
+            joints.position = [o.steer_front, o.steer_rear, 0.0, 0.0, 0.0, 0.0]
+            joints.velocity = [0.0, 0.0, *(float(w) for w in o.wheel_speed)]
+            self.pub_imu.publish(imu)
+            self.pub_joints.publish(joints)
         self.last_publish = time.monotonic()
 
     def _publish_reference(self) -> None:

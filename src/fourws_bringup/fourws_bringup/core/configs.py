@@ -31,6 +31,7 @@ PACKAGE_FILES: dict[str, tuple[str, str]] = {
     "allocator_node": ("fourws_torque_alloc", "allocator.yaml"),
     "recorder_node": ("fourws_bringup", "recorder.yaml"),
     "replay_node": ("fourws_bringup", "replay.yaml"),
+    "adapter_node": ("fourws_bringup", "adapter.yaml"),
 }
 #: nodes whose sections a controller preset holds
 PRESET_NODES = ("mpc_node", "allocator_node")
