@@ -234,3 +234,16 @@ def test_a_realistic_run_over_topics_equals_the_in_process_loop(tmp_path):
     sensed = tracking_metrics(dataclasses.replace(run, ground_truth=run.mpc_command | {
         "stamp_ns": np.zeros(0, dtype=np.int64)}))
     assert sensed["rmse_heading_error_deg"] != m["rmse_heading_error_deg"]
+
+
+def test_every_node_reports_its_runtime_on_diagnostics(runs):
+    """Each node of the graph publishes its rejection counts and its runtime status
+    (``<node>: runtime``) on /diagnostics; the recorder keeps them in the bag."""
+    from fourws_bringup.bag.reader import McapBag
+
+    names: set[str] = set()
+    with McapBag(runs["mpc_4ws"][0] / "bag") as bag:
+        for _t, _log, _pub, msg in bag.decoded(["/diagnostics"]):
+            names.update(s.name for s in msg.status)
+    for node in ("plant_node", "mpc_node", "speed_pid_node", "allocator_node"):
+        assert f"/{node}" in names and f"/{node}: runtime" in names, (node, names)

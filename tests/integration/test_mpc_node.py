@@ -148,3 +148,49 @@ def test_a_state_that_comes_before_the_reference_is_answered_when_it_arrives(gra
     ros.spin_until(lambda: False, 0.5)
     assert len(cmds[70_000_000]) == 1 and set(cmds) == {70_000_000}
     assert math.isfinite(cmds[70_000_000][0].delta_front)
+
+
+def test_diagnostics_carry_the_solver_status_and_say_when_the_input_goes_stale(graph, ros):
+    """/diagnostics has two statuses per node: the rejection counts (read into metrics.json)
+    and ``<node>: runtime``: the last solver status, fallbacks, deadline misses and the
+    input's age, OK while states come and WARN once none came for a second."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from fourws_common.qos import DIAGNOSTICS_QOS
+
+    preset = config_dir("fourws_bringup") / "controllers" / "mpc_4ws.yaml"
+    graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                    params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)])])
+    runtime: list[DiagnosticStatus] = []
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics",
+        lambda m: runtime.extend(s for s in m.status if s.name == "/mpc_node: runtime"),
+        DIAGNOSTICS_QOS)
+    cmds: dict[int, MpcCommand] = {}
+    ros.node.create_subscription(MpcCommand, "/control/mpc_command",
+                                 lambda m: cmds.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0)
+    path = load_scenario("dlc_60_mu05").path
+    pub_ref.publish(ReferenceTrajectory(x=path.x.tolist(), y=path.y.tolist(),
+                                        yaw=path.yaw.tolist(),
+                                        curvature=path.curvature.tolist(),
+                                        speed=path.speed.tolist()))
+    assert ros.spin_until(lambda: pub_ref.wait_for_all_acked(Duration(seconds=0)), 10.0)
+    state = VehicleState(x=0.0, y=0.02, vx=16.667)
+    state.mu, state.fz = np.full(4, 0.5), np.full(4, 1800.0)
+    pub.publish(state)
+    assert ros.spin_until(lambda: 0 in cmds, 10.0)
+    n = len(runtime)
+    assert ros.spin_until(lambda: len(runtime) > n, 5.0)
+    first = {kv.key: kv.value for kv in runtime[-1].values}
+    assert first["solver_status"].startswith("solved"), first
+    assert float(first["input_age_s"]) < 1.0 and runtime[-1].level == DiagnosticStatus.OK
+    assert first["fallbacks"] == "0"
+    # no state any more: within a few reports the input is stale
+    assert ros.spin_until(lambda: runtime[-1].level == DiagnosticStatus.WARN, 10.0)
+    assert "no /vehicle/state for" in runtime[-1].message

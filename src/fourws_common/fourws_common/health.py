@@ -8,9 +8,17 @@ exception caught in a callback, with the input that caused it. The counts go out
 node: OK with no rejections, WARN once any input was rejected, ERROR once a callback raised)
 every ``period_s`` of steady time and within 0.1 s of a change, so a recorded run holds the
 final counts of every node (``input_rejections`` in metrics.json).
+
+A node that has a runtime condition to report (solver status, fallbacks, deadline misses, the
+age of its newest input) registers a :class:`Runtime` provider; its status goes out in the
+same array as a second DiagnosticStatus named ``<node>: runtime`` (OK, WARN or ERROR, as
+``rqt_robot_monitor`` shows it), with text values, so it never mixes with the counts.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
@@ -22,6 +30,38 @@ from fourws_common.topics import DIAGNOSTICS
 
 #: steady-clock period (s) of the change check; a change is published within this time.
 CHANGE_POLL_S = 0.1
+#: suffix of the runtime status's name
+RUNTIME_SUFFIX = ": runtime"
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+@dataclass
+class Runtime:
+    """A node's runtime condition: level (OK, WARN, ERROR), one-line message, text values."""
+
+    level: bytes = OK
+    message: str = "OK"
+    values: dict[str, str] = field(default_factory=dict)
+
+
+def worst(*levels: bytes) -> bytes:
+    """The most severe of diagnostic levels."""
+    return max(levels, key=lambda b: b[0] if isinstance(b, bytes) else int(b))
+
+
+#: steady seconds without an input after which a node's runtime status says it is stale
+STALE_AFTER_S = 1.0
+
+
+def with_input_age(rt: Runtime, age_s: float | None, what: str) -> Runtime:
+    """``rt`` with ``input_age_s``, and WARN when no ``what`` came for :data:`STALE_AFTER_S`
+    (a stopped plant or a lost link); ``age_s`` None: nothing received yet."""
+    rt.values["input_age_s"] = "none yet" if age_s is None else f"{age_s:.3f}"
+    if age_s is not None and age_s > STALE_AFTER_S:
+        rt.level = worst(rt.level, WARN)
+        stale = f"no {what} for {age_s:.1f} s"
+        rt.message = stale if rt.message == "OK" else f"{rt.message}; {stale}"
+    return rt
 
 
 class NodeHealth:
@@ -38,6 +78,11 @@ class NodeHealth:
                                           qos_of(DIAGNOSTICS))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = node.create_timer(CHANGE_POLL_S, self._tick, clock=steady)
+        self._runtime: Callable[[], Runtime] | None = None
+
+    def runtime(self, provider: Callable[[], Runtime]) -> None:
+        """Publish ``provider()`` as this node's runtime status (module docstring)."""
+        self._runtime = provider
 
     @property
     def counts(self) -> dict[str, int]:
@@ -100,6 +145,15 @@ class NodeHealth:
         msg = DiagnosticArray()
         msg.header.stamp = node.get_clock().now().to_msg()
         msg.status = [status]
+        if self._runtime is not None:
+            try:
+                rt = self._runtime()
+            except Exception as exc:  # noqa: BLE001 - diagnostics never kill the node
+                rt = Runtime(ERROR, f"runtime status failed: {type(exc).__name__}: {exc}")
+            extra = DiagnosticStatus(name=status.name + RUNTIME_SUFFIX, hardware_id="fourws",
+                                     level=rt.level, message=rt.message)
+            extra.values = [KeyValue(key=k, value=str(v)) for k, v in rt.values.items()]
+            msg.status.append(extra)
         self._pub.publish(msg)
         self._published = dict(counts)
         self._since_publish_s = 0.0

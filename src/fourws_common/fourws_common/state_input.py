@@ -24,6 +24,7 @@ Each state goes through, in this order:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -31,7 +32,7 @@ from typing import Any
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
-from fourws_common.health import NodeHealth
+from fourws_common.health import NodeHealth, Runtime, with_input_age
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
     InputConfig,
@@ -72,6 +73,7 @@ class StateInput:
         self._checked = tuple(checked)
         self._core_name = core_name
         self._waiting: Any = None  # the newest plausible state that came before a reference
+        self._last_input: float | None = None  # steady time of the newest state received
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self._match_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
@@ -110,7 +112,17 @@ class StateInput:
             return []
         return [f"{pub.topic_name} ({n})" for pub, n in zip(self._outputs, counts, strict=True)]
 
+    def input_age_s(self) -> float | None:
+        """Steady seconds since the newest state arrived (None before the first)."""
+        return None if self._last_input is None else time.monotonic() - self._last_input
+
+    def runtime(self, extra: Runtime | None = None) -> Runtime:
+        """The node's runtime status (``fourws_common.health``): ``extra`` (the node's own
+        condition, OK if None) with the input's age, WARN when it is stale."""
+        return with_input_age(extra or Runtime(), self.input_age_s(), VEHICLE_STATE.name)
+
     def _on_state(self, msg: Any) -> None:
+        self._last_input = time.monotonic()
         stamp_ns = stamp_to_ns(msg.header.stamp)
         bad = implausible_fields(msg, self._checked)
         if bad:

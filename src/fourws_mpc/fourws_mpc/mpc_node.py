@@ -20,7 +20,10 @@ controller step for the diagnostics, and guards its input:
 - a parameter change is applied to the running controller (``MpcController.update_config``):
   plan, horizons and APCHA history are kept; setting a value it already has changes nothing.
 
-Every rejection is counted and logged at a limited rate, and published on ``/diagnostics``.
+Every rejection is counted and logged at a limited rate, and published on ``/diagnostics``,
+beside a runtime status (``<node>: runtime``): the last solver status, fallbacks, deadline
+misses (a step longer than the control period) and the age of the newest state (WARN when
+stale).
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import time
 
 from rclpy.node import Node
 
-from fourws_common.health import NodeHealth
+from fourws_common.health import WARN, NodeHealth, Runtime
 from fourws_common.input_guard import state_mu
 from fourws_common.node_main import run_node
 from fourws_common.qos import qos_of
@@ -72,7 +75,30 @@ class MpcNode(Node):
             StateHandlers(ready=lambda: self.ref is not None, step=self._step,
                           repeat=self._repeat, held=self._answer_held, reset=self._reset),
             "controller", outputs=(self.pub_cmd, self.pub_diag))
+        self.deadline_misses = self._misses_reported = 0
+        self.last_status, self.last_solve_ms = "none yet", 0.0
+        self.health.runtime(self._runtime)
         self.get_logger().info(f"controller '{self.params.config.controller}'")
+
+    def _runtime(self) -> Runtime:
+        """Solver status of the last step, fallbacks, deadline misses (a step that took more
+        than the control period), and the input's age (StateInput.runtime)."""
+        fallbacks = self.health.counts.get("solver_fallback", 0)
+        new_misses = self.deadline_misses - self._misses_reported
+        self._misses_reported = self.deadline_misses
+        rt = Runtime(values={"solver_status": self.last_status,
+                             "last_solve_ms": f"{self.last_solve_ms:.3f}",
+                             "fallbacks": str(fallbacks),
+                             "deadline_misses": str(self.deadline_misses)})
+        problems = []
+        if self.cached is not None and self.cached[1].fallback:
+            problems.append(f"last step fell back ({self.last_status})")
+        if new_misses:
+            problems.append(f"{new_misses} step(s) over the {self.params.config.dt_s * 1e3:.0f}"
+                            " ms period since the last report")
+        if problems:
+            rt.level, rt.message = WARN, "; ".join(problems)
+        return self.state_input.runtime(rt)
 
     def _on_params(self, cfg: MpcConfig) -> None:
         old = self.ctrl.cfg
@@ -122,6 +148,9 @@ class MpcNode(Node):
         t0 = time.perf_counter()
         res = self.ctrl.step(stamp_ns * 1e-9, meas, self.ref, mu=state_mu(msg.mu))
         solve_ms = (time.perf_counter() - t0) * 1e3
+        self.last_status, self.last_solve_ms = res.solver_status, solve_ms
+        if solve_ms > self.params.config.dt_s * 1e3:
+            self.deadline_misses += 1
         cmd, diag = self._cmd_msg, self._diag_msg
         cmd.header = diag.header = msg.header
         cmd.delta_front, cmd.delta_rear = res.delta_front, res.delta_rear

@@ -74,6 +74,7 @@ from fourws_common.conversions import (
     stamp_to_ns,
 )
 from fourws_common.exit_codes import ExitCode
+from fourws_common.health import WARN, NodeHealth, Runtime
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import qos_of
@@ -194,6 +195,9 @@ class PlantNode(Node):
         # realtime: stamps (ns) of the held commands, and the honesty counters
         self.cmd_stamp_ns: int | None = None
         self.torque_stamp_ns: int | None = None
+        self.health = NodeHealth(self)
+        self.health.runtime(self._runtime)
+        self._reported = (0, 0)   # overruns, late commands at the last runtime report
         self.late_commands = 0
         self.safe_hold_steps = 0
         self.overruns = 0
@@ -376,6 +380,24 @@ class PlantNode(Node):
     def _end_check(self) -> tuple[bool, str, bool]:
         ended, reason = self.scenario.check_end(self.outputs, self.abort)
         return ended, reason, ended and not reason.startswith("aborted")
+
+    def _runtime(self) -> Runtime:
+        """The run's progress and, in realtime, its timing honesty: WARN while in safe hold
+        or when periods were overrun or commands came late since the last report."""
+        rt = Runtime(values={"state": ("ended" if self.ended else "running" if self.started
+                                       else "waiting for subscribers"),
+                             "steps": str(self.step_k), "overruns": str(self.overruns),
+                             "late_commands": str(self.late_commands),
+                             "safe_hold_steps": str(self.safe_hold_steps)})
+        new = (self.overruns - self._reported[0], self.late_commands - self._reported[1])
+        self._reported = (self.overruns, self.late_commands)
+        problems = [f"{n} {what}" for n, what in zip(new, ("period(s) overrun",
+                                                          "late command(s)"), strict=True) if n]
+        if self.in_safe_hold:
+            problems.insert(0, "safe hold: no fresh commands")
+        if problems:
+            rt.level, rt.message = WARN, "; ".join(problems) + " since the last report"
+        return rt
 
     def _status_heartbeat(self) -> None:
         if self.start_wall is not None and not self.ended:

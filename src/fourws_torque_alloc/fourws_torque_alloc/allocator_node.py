@@ -20,13 +20,14 @@ restart of the state stamps clears every held input and the last valid torques.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, fields
 
 import numpy as np
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
-from fourws_common.health import NodeHealth
+from fourws_common.health import NodeHealth, Runtime, with_input_age
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
     Stamp,
@@ -89,6 +90,11 @@ class AllocatorNode(Node):
         self.last_valid = np.zeros(4)
         self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
         self.health = NodeHealth(self)
+        self._last_input: float | None = None
+        self.health.runtime(lambda: with_input_age(
+            Runtime(values={"method": self.params.config.method}),
+            None if self._last_input is None else time.monotonic() - self._last_input,
+            VEHICLE_STATE.name))
         self._match_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
         self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.ros_name,
                                          qos_of(WHEEL_TORQUES))
@@ -132,6 +138,7 @@ class AllocatorNode(Node):
         self.alloc = TorqueAllocator(self.params.config.core())
 
     def _on_state(self, msg: VehicleState) -> None:
+        self._last_input = time.monotonic()
         stamp_ns = stamp_to_ns(msg.header.stamp)
         verdict = self.gate.check(stamp_ns)
         if verdict in (Stamp.PAST, Stamp.FUTURE):

@@ -50,6 +50,7 @@ class SpeedPidNode(Node):
             StateHandlers(ready=lambda: self.profile is not None, step=self._step,
                           repeat=self._repeat, held=self._held, reset=self._reset),
             "PID", outputs=(self.pub,))
+        self.health.runtime(self.state_input.runtime)
 
     def _on_params(self, cfg: SpeedPidConfig) -> None:
         self.pid.cfg = cfg  # the integral is in newtons: a gain change is bumpless

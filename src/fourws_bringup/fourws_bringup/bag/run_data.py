@@ -211,6 +211,8 @@ def read_run(path: str | Path) -> RunData:
 def _add_rejections(out: dict[str, dict[str, int]], msg: Any) -> None:
     """Fold one DiagnosticArray's counters (KeyValue value = a count) into ``out``."""
     for st in msg.status:
+        if str(st.name).endswith(": runtime"):  # fourws_common.health: text, not counts
+            continue
         node = out.setdefault(str(st.name).lstrip("/"), {})
         for kv in st.values:
             try:
