@@ -70,7 +70,8 @@ def _rejections(ros) -> dict[str, dict[str, int]]:
 
     def on_diag(msg: DiagnosticArray) -> None:
         for st in msg.status:
-            seen[st.name.lstrip("/")] = {kv.key: int(kv.value) for kv in st.values}
+            if not st.name.endswith(": runtime"):   # the counts, not the runtime status
+                seen[st.name.lstrip("/")] = {kv.key: int(kv.value) for kv in st.values}
 
     ros.node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DIAGNOSTICS_QOS)
     return seen

@@ -7,13 +7,17 @@ re-encode) and the QoS its publisher offers (the topic table's QoS kind,
 ``fourws_common.topics``: control per step, latched for ``/reference/*`` and
 ``/run/status``, clock for ``/clock``, diagnostics for ``/diagnostics``), and appends every
 message to ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`, with
-rosbag2's times: ``log_time`` = receive time on the node's clock (with ``use_sim_time``, as
-``ros2 bag record --use-sim-time``: ``fourws run`` sets it in lockstep, so ``ros2 bag play``
-replays the run at the simulated rate), ``publish_time`` = the publisher's send time and
-``sequence`` = its publication sequence number (DDS's message info). ``custom_data`` in
-``metadata.yaml`` (and its copy inside the MCAP) says so (``fourws_log_time``: ``ros_time`` or
-``sim_time``; ``fourws_publish_time``: ``send_time``), so readers tell these bags from older
-ones (wall receive times, header stamps as publish times).
+rosbag2's log time: ``log_time`` = receive time on the node's clock (with ``use_sim_time``,
+as ``ros2 bag record --use-sim-time``: ``fourws run`` sets it in lockstep, so ``ros2 bag
+play`` replays the run at the simulated rate). ``publish_time`` is the wall receive time:
+rosbag2 writes the publisher's send time (DDS's message info), but rclpy's EventsExecutor
+(Jazzy) cannot hand message info to a callback, and the single-threaded executor that can
+was too slow for the recorder on two loaded cores (it lost 185 of 1044 steps); the wall
+receive time is the send time plus one delivery, and MCAP allows the log time where the
+publish time is unknown. ``sequence`` counts the topic's messages. ``custom_data`` in
+``metadata.yaml`` (and in its copy inside the MCAP) says which (``fourws_log_time``:
+``ros_time`` or ``sim_time``; ``fourws_publish_time``: ``wall_receive_time``), so readers
+tell these bags from older ones (wall receive log times, header stamps as publish times).
 
 Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
 messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten with the
@@ -199,11 +203,6 @@ def message_class(type_name: str):
 class RecorderNode(Node):
     """Subscribes serialized, writes the bag; all storage logic is in fourws_bringup.bag."""
 
-    #: rclpy's EventsExecutor (Jazzy) does not hand DDS's message info (send time, sequence
-    #: number) to a callback ("SystemError: null argument to internal routine"); the
-    #: recorder is off the control chain, so the stable executor costs the graph nothing.
-    EXECUTOR = "single"
-
     def __init__(self) -> None:
         super().__init__("recorder_node")
         self.done = False
@@ -237,7 +236,8 @@ class RecorderNode(Node):
         classes = {info.name: message_class(info.type) for info in infos}
         sim = bool(self.get_parameter("use_sim_time").value)
         custom = {"fourws_log_time": "sim_time" if sim else "ros_time",
-                  "fourws_publish_time": "send_time", "fourws_namespace": self.get_namespace()}
+                  "fourws_publish_time": "wall_receive_time",
+                  "fourws_namespace": self.get_namespace()}
         try:
             self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
                                     compression=cfg.compression, library="fourws recorder_node",
@@ -326,10 +326,9 @@ class RecorderNode(Node):
 
         clock = self.get_clock()
 
-        def on_message(data: bytes, info: Mapping) -> None:
+        def on_message(data: bytes) -> None:
             now = clock.now().nanoseconds  # rosbag2's receive time: the node's clock
-            sent = int(info.get("source_timestamp", 0) or 0) or None
-            seq = info.get("publication_sequence_number")
+            wall = time.time_ns()
             self._last_rx = time.monotonic()
             with self._lock:
                 if self._finalised or self.writer is None:
@@ -338,8 +337,7 @@ class RecorderNode(Node):
                     stamp = cdr_stamp_ns(data)
                     if stamp is not None and stamp >= 0:
                         gaps.add(stamp)
-                self.writer.write(topic, data, now, sent,
-                                  int(seq) if isinstance(seq, int) and seq > 0 else None)
+                self.writer.write(topic, data, now, wall)
                 self.received += 1
         return on_message
 

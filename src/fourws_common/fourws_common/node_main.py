@@ -85,10 +85,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     nodes: list[Node] = []
     code = 0
     try:
-        # a node class may name the executor it needs (``EXECUTOR``); $FOURWS_EXECUTOR wins
-        wanted = {getattr(f, "EXECUTOR", None) for f in factories} - {None}
-        executor = make_executor(os.environ.get(EXECUTOR_ENV)
-                                 or (wanted.pop() if len(wanted) == 1 else None))
+        executor = make_executor()
         for factory in factories:
             nodes.append(factory())
             check_overrides(nodes[-1], args)

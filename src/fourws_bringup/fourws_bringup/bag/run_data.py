@@ -106,12 +106,12 @@ class RunData:
 
     Each per-topic dict has ``stamp_ns`` (int64), ``t_s``, ``log_ns`` (int64, the recorder's
     receive time on its clock: simulated in a lockstep run of this version, wall in older
-    bags), ``wall_ns`` (int64: the publisher's send time where the bag records it,
-    ``custom_data.fourws_publish_time: send_time``, else the receive time; what step
-    latencies are measured on) and one array per message field
-    (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one row per header
-    stamp (the first message of each stamp), sorted by stamp. A topic absent from the bag
-    gives a dict with empty ``stamp_ns``/``t_s``/``log_ns`` only.
+    bags), ``wall_ns`` (int64: the wall time of the message, the bag's ``publish_time`` where
+    ``custom_data.fourws_publish_time`` says it is one, else the log time of an older bag,
+    which was the wall receive time; what step latencies are measured on) and one array per
+    message field (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one
+    row per header stamp (the first message of each stamp), sorted by stamp. A topic absent
+    from the bag gives a dict with empty ``stamp_ns``/``t_s``/``log_ns``/``wall_ns`` only.
     """
 
     path: Path
@@ -173,7 +173,8 @@ def read_run(path: str | Path) -> RunData:
         rejections: dict[str, dict[str, int]] = {}
         wanted = [recorded[t] for t in (*STEP_TOPICS, REFERENCE, STATUS, DIAGNOSTICS)
                   if t in recorded]
-        sent = bag.custom_data.get("fourws_publish_time") == "send_time"
+        sent = bag.custom_data.get("fourws_publish_time") in ("send_time",
+                                                               "wall_receive_time")
         for name, log_ns, pub_ns, msg in bag.decoded(wanted):
             topic = topics.graph_name(name, ns)
             if topic in per:

@@ -1,11 +1,11 @@
 """Write a rosbag2-layout MCAP bag chunk by chunk: :class:`BagWriter`, the recorder's storage.
 
-Times follow rosbag2: a message's ``log_time`` is when the recorder received it on its node
-clock (simulated time under ``use_sim_time``, so ``ros2 bag play`` paces a lockstep run at
-the simulated rate), its ``publish_time`` when the publisher sent it and its ``sequence``
-the publisher's sequence number, both as DDS reports them (the recorder passes them). A
-caller that has no send time gets the header stamp (or a ``builtin_interfaces/Time`` first
-field, as in ``/clock``) read straight from the CDR bytes, else the receive time. Schemas
+A message's ``log_time`` is when the recorder received it on its node clock (simulated time
+under ``use_sim_time``, so ``ros2 bag play`` paces a lockstep run at the simulated rate, as
+rosbag2 does); its ``publish_time`` what the caller passes (the recorder: the wall receive
+time), else the header stamp (or a ``builtin_interfaces/Time`` first field, as in
+``/clock``) read straight from the CDR bytes, else the log time; its ``sequence`` what the
+caller passes, else the count of the topic's messages. Schemas
 carry the full ``ros2msg`` text and channels ``offered_qos_profiles`` and
 ``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`).
 """
