@@ -16,13 +16,16 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 for _pkg in ("fourws_common", "fourws_torque_alloc"):
     _p = str(ROOT / "src" / _pkg)
     if _p not in sys.path:
         sys.path.insert(0, _p)
+
+# isort: off
+import fourws_common  # noqa: E402, F401 - first: the BLAS thread default
+import numpy as np  # noqa: E402
+# isort: on
 
 from fourws_torque_alloc.core.allocation import (  # noqa: E402
     AllocatorConfig,

@@ -24,7 +24,11 @@ ROOT = Path(__file__).resolve().parents[1]
 for pkg in ("fourws_common", "fourws_sim"):
     sys.path.insert(0, str(ROOT / "src" / pkg))
 
+
+# isort: off
+import fourws_common  # noqa: E402, F401 - first: the BLAS thread default
 import numpy as np  # noqa: E402
+# isort: on
 
 from fourws_sim.core import tyre  # noqa: E402
 from fourws_sim.core.scenario import load_scenario  # noqa: E402

@@ -13,3 +13,5 @@ for pkg in ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", 
     path = str(ROOT / "src" / pkg)
     if path not in sys.path:
         sys.path.insert(0, path)
+
+import fourws_common  # noqa: E402, F401 - the BLAS thread default, before a test imports numpy

@@ -257,7 +257,74 @@ def test_unknown_solver_or_model_is_a_clear_error():
     from fourws_mpc.core.model import ModelParams
     from fourws_mpc.core.prediction_model import make_prediction_model
 
-    with pytest.raises(ValueError, match="qp_solver.*known: osqp"):
+    with pytest.raises(ValueError, match="qp_solver.*known:.*osqp"):
         S.make_qp_solver("cplex", S.QpSettings())
     with pytest.raises(ValueError, match="prediction_model.*single_track"):
         make_prediction_model("bicycle9", ModelParams())
+
+
+@pytest.mark.parametrize("seed", [0, 3, 5, 9])
+def test_daqp_gives_the_active_set_solution_osqp_approaches(seed):
+    """DAQP (dense dual active set) and a tightly converged, polished OSQP solve the same
+    condensed QPs, with the rate and position bounds active: same increments to 1e-6 of their
+    bounds, DAQP's feasible to 1e-9 and its cost no higher (it is the exact optimum)."""
+    z, u, Ak, Bk, dk = _model(seed)
+    n_p, n_c = 20, 8
+    ref = np.column_stack([np.full(n_p, 0.2), np.full(n_p, z[StateIdx.Y] + 3.0)])
+    args = (Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([50.0, 40.0]),
+            np.array([1.0, 1.0, 1e-6]), 1e3, _bounds())
+    seen = []
+
+    class Keep(S.DaqpSolver):
+        def solve(self, qp, warm_x):
+            seen.append(qp)
+            return super().solve(qp, warm_x)
+
+    d = Q.MpcQp(solver=Keep(S.QpSettings())).solve(*args)
+    o = Q.MpcQp(S.QpSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000,
+                             polishing=True)).solve(*args)
+    assert d.ok and o.ok and d.code is S.QpStatus.SOLVED
+    np.testing.assert_allclose(d.du_scaled, o.du_scaled, atol=1e-6)
+    qp = seen[0]
+    x = np.concatenate([d.du_scaled.ravel(), [d.slack]])
+    Az = qp.A @ x
+    assert np.all(Az >= qp.lo - 1e-9) and np.all(Az <= qp.hi + 1e-9)
+    assert np.any(np.isclose(np.abs(d.du_scaled), 1.0, atol=1e-9)), "no bound active"
+
+    def cost(v):
+        return 0.5 * v[:-1] @ qp.H @ v[:-1] + 0.5 * qp.slack_hessian * v[-1] ** 2 + qp.q @ v
+
+    xo = np.concatenate([o.du_scaled.ravel(), [o.slack]])
+    assert cost(x) <= cost(xo) + 1e-9
+
+
+def test_daqp_reports_infeasibility_and_refuses_bad_data():
+    z, u, Ak, Bk, dk = _model(7)
+    z[StateIdx.R] = 0.6             # far above the hard yaw-rate bound (as above)
+    Ak, Bk, dk = discretise(z, u, P, 0.01)
+    n_p, n_c = 12, 6
+    ref = np.column_stack([np.zeros(n_p), np.full(n_p, z[StateIdx.Y] + 1.0)])
+    b = _bounds(state_bounds=True)
+    b = Q.QpBounds(b.du_max, b.u_max, b.enabled, vy_max=0.35, r_max=0.25, band_phi=1.0,
+                   band_y=5.0, state_bounds=True)
+    qp = Q.MpcQp(solver=S.DaqpSolver(S.QpSettings()))
+    sol = qp.solve(Ak, Bk, dk, z, u, ref, n_p, n_c, np.array([1.0, 1e3]),
+                   np.array([1e-3, 1e-3, 1e-3]), 1.0, b)
+    assert not sol.ok and sol.code is S.QpStatus.PRIMAL_INFEASIBLE
+    assert np.all(np.isfinite(sol.du))
+    dk_bad = dk.copy()
+    dk_bad[0] = np.nan
+    sol = qp.solve(Ak, Bk, dk_bad, z, u, ref, n_p, n_c, np.array([1.0, 1e3]),
+                   np.array([1e-3, 1e-3, 1e-3]), 1.0, _bounds())
+    assert not sol.ok and sol.code is S.QpStatus.INVALID_DATA
+
+
+def test_the_closed_loop_with_daqp_follows_the_osqp_one_within_solver_tolerance():
+    from fourws_bringup.core.closed_loop import run_closed_loop
+
+    runs = {s: run_closed_loop("dlc_60_mu05", "improved", max_steps=400,
+                               mpc_overrides={"qp_solver": s}) for s in ("osqp", "daqp")}
+    for key in ("y", "yaw", "yaw_rate"):
+        np.testing.assert_allclose(runs["daqp"].state[key], runs["osqp"].state[key],
+                                   rtol=0, atol=1e-6, err_msg=key)
+    assert not np.any(runs["daqp"].mpc["fallback"])

@@ -1,0 +1,3 @@
+"""fourws_torque_alloc (see the package.xml description)."""
+
+import fourws_common  # noqa: F401 - first: sets the BLAS thread default before numpy loads
