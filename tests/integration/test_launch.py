@@ -215,10 +215,11 @@ def test_ros2_param_describe_shows_the_choices_of_a_string_parameter(ros2_env, d
                     params_files=[str(config_dir("fourws_mpc") / "mpc.yaml")])])
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    r = subprocess.run(["bash", "-c", f'source "{ros2_env}" && ros2 param describe /mpc_node '
-                        "weights_mode np_max"], env=env, capture_output=True, text=True,
-                       timeout=120)
-    assert r.returncode == 0, r.stderr[-2000:]
+    # no daemon (none is left behind); wait for the node, not a fixed time
+    r = subprocess.run(["bash", "-c", f'source "{ros2_env}" && ros2 param describe '
+                        "--no-daemon --spin-time 5 --timeout 120 /mpc_node weights_mode np_max"],
+                       env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-2000:])
     text = r.stdout
     assert "Constraints:" in text and "fixed" in text and "fuzzy" in text, text
     assert "Min value:" in text and "Max value:" in text, text
