@@ -24,12 +24,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
-from fourws_common.conversions import RateLimitedLog, stamp_to_ns
+from fourws_common.conversions import RateLimitedLog, fill_vehicle_state, stamp_to_ns
 from fourws_common.health import NodeHealth
 from fourws_common.node_main import run_node
 from fourws_common.params import param
@@ -152,19 +151,14 @@ class AdapterNode(Node):
                 (p.x, p.y, p.z, q.x, q.y, q.z, q.w), (t.linear.x, t.linear.y, t.angular.z),
                 (imu.angular_velocity.z, imu.linear_acceleration.x, imu.linear_acceleration.y),
                 (list(joints.name), list(joints.position), list(joints.velocity)),
-                self.joint_map, self.estimator, self.params.config.yaw_rate_source)
+                self.joint_map, self.estimator, self.params.config.yaw_rate_source,
+                t_s=stamp * 1e-9)
         except ValueError as exc:
             self.health.reject("bad_input", stamp, f"inputs at {stamp} ns rejected: {exc}")
             return
         msg = self._msg
         msg.header.stamp = odom.header.stamp
-        for k in ("x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
-                  "steer_front", "steer_rear"):
-            setattr(msg, k, float(getattr(s, k)))
-        msg.wheel_speed, msg.fz, msg.fy, msg.mu = (np.asarray(v, dtype=float) for v in
-                                                   (s.wheel_speed, s.fz, s.fy, s.mu))
-        msg.wheel_torque = msg.fx = np.zeros(4)   # not measured: no controller reads them
-        self.pub.publish(msg)
+        self.pub.publish(fill_vehicle_state(msg, s))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourws_common.wheels import STEER_JOINTS, WHEEL_JOINTS
+from fourws_sim.core.plant_io import PlantOutputs
 from fourws_torque_alloc.core.tyre_estimate import TyreEstimator
 
 
@@ -84,36 +85,17 @@ def yaw_of(qx: float, qy: float, qz: float, qw: float) -> float:
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
-@dataclass(frozen=True)
-class ControllerInput:
-    """The VehicleState fields the controllers read (SI; wheel arrays FL FR RL RR)."""
-
-    x: float
-    y: float
-    yaw: float
-    vx: float
-    vy: float
-    yaw_rate: float
-    ax: float
-    ay: float
-    sideslip: float
-    steer_front: float
-    steer_rear: float
-    wheel_speed: np.ndarray
-    fz: np.ndarray
-    fy: np.ndarray
-    mu: np.ndarray
-
-
 def controller_input(pose: tuple[float, float, float, float, float, float, float],
                      twist: tuple[float, float, float], imu: tuple[float, float, float],
                      joints: tuple[Sequence[str], Sequence[float], Sequence[float]],
                      joint_map: JointMap, estimator: TyreEstimator,
-                     yaw_rate_from: str = "imu") -> ControllerInput:
-    """``pose`` = (x, y, z, qx, qy, qz, qw) of Odometry's pose, ``twist`` = (vx, vy, r) of its
-    body-frame twist, ``imu`` = (r, ax, ay) of an Imu, ``joints`` = (name, position,
-    velocity) of a JointState. ``yaw_rate_from``: ``imu`` or ``odom``. ValueError for a
-    non-finite value, naming it."""
+                     yaw_rate_from: str = "imu", t_s: float = 0.0) -> PlantOutputs:
+    """Every VehicleState field (:class:`~fourws_sim.core.plant_io.PlantOutputs`, the one
+    type of them) at ``t_s``: ``pose`` = (x, y, z, qx, qy, qz, qw) of Odometry's pose,
+    ``twist`` = (vx, vy, r) of its body-frame twist, ``imu`` = (r, ax, ay) of an Imu,
+    ``joints`` = (name, position, velocity) of a JointState; wheel torques and longitudinal
+    tyre forces, which nothing measures and no controller reads, are zero.
+    ``yaw_rate_from``: ``imu`` or ``odom``. ValueError for a non-finite value, naming it."""
     x, y, _z, qx, qy, qz, qw = (float(v) for v in pose)
     vx, vy, r_odom = (float(v) for v in twist)
     r_imu, ax, ay = (float(v) for v in imu)
@@ -127,5 +109,5 @@ def controller_input(pose: tuple[float, float, float, float, float, float, float
     if not all(math.isfinite(v) for v in (steer_f, steer_r, *wheels)):
         raise ValueError("non-finite joint position or velocity")
     fz, fy, mu = estimator.estimate(ax, ay)
-    return ControllerInput(x, y, yaw, vx, vy, named["yaw_rate"], ax, ay, math.atan2(vy, vx),
-                           steer_f, steer_r, wheels, fz, fy, mu)
+    return PlantOutputs(t_s, x, y, yaw, vx, vy, named["yaw_rate"], ax, ay, math.atan2(vy, vx),
+                        steer_f, steer_r, wheels, np.zeros(4), np.zeros(4), fy, fz, mu)
