@@ -232,13 +232,14 @@ def test_start_gate_subscribes_to_the_state_only_once_the_commands_are_matched(
     assert cmd_pub.get_subscription_count() == 1
 
 
-def test_a_lockstep_bag_has_simulated_log_times_and_wall_publish_times(tmp_path):
+def test_a_lockstep_bag_has_simulated_log_times_and_send_times_as_publish_times(tmp_path):
     """``fourws run`` in lockstep records on simulated time (rosbag2's --use-sim-time), so
     ``ros2 bag play`` paces it at the simulated rate: each step's messages are logged at about
     their stamp, never on the wall clock, and the bag lasts as long as the simulated run.
-    ``publish_time`` is the wall receive time (recorder_node's docstring says why not the
-    send time); metadata.yaml and its copy inside the MCAP carry the same custom_data, which
-    says so, and the step latencies are measured on it."""
+    ``publish_time`` is the publisher's send time and ``sequence`` its sequence number (DDS's
+    message info, as rosbag2 writes them): a command is sent after the state it answers, and
+    every publisher's numbers rise. metadata.yaml and its copy inside the MCAP carry the same
+    custom_data, which says so, and the step latencies are measured on the send times."""
     import subprocess
 
     from conftest import cut_scenario
@@ -252,19 +253,32 @@ def test_a_lockstep_bag_has_simulated_log_times_and_wall_publish_times(tmp_path)
     assert r.returncode == 0, r.stderr[-3000:]
     t1 = time.time_ns()
     rows: dict[str, list[tuple[int, int, int]]] = {}
+    seqs: dict[str, list[int]] = {}
     with open(out / "bag" / "bag_0.mcap", "rb") as fh:
         reader = make_reader(fh)
         for _schema, channel, msg in reader.iter_messages(log_time_order=False):
             stamp = int.from_bytes(msg.data[4:8], "little") * 10**9 + int.from_bytes(
                 msg.data[8:12], "little")
             rows.setdefault(channel.topic, []).append((msg.log_time, msg.publish_time, stamp))
+            seqs.setdefault(channel.topic, []).append(msg.sequence)
         inner = next(m for m in reader.iter_metadata() if m.name == "rosbag2")
     inner = yaml.safe_load(inner.metadata["serialized_metadata"])
     meta = yaml.safe_load((out / "bag" / "metadata.yaml").read_text())
     meta = meta["rosbag2_bagfile_information"]
     assert inner["custom_data"] == meta["custom_data"]
     assert meta["custom_data"]["fourws_log_time"] == "sim_time"
-    assert meta["custom_data"]["fourws_publish_time"] == "wall_receive_time"
+    assert meta["custom_data"]["fourws_publish_time"] == "send_time"
+    for topic, seq in seqs.items():
+        if topic == "/diagnostics":
+            continue  # a publisher per node, each with its own numbers
+        assert seq[0] >= 1 and all(b > a for a, b in zip(seq, seq[1:], strict=False)), topic
+    sent_state: dict[int, int] = {}  # first send of each step's state (lockstep may repeat)
+    for _l, pub, stamp in rows["/vehicle/state"]:
+        sent_state[stamp] = min(pub, sent_state.get(stamp, pub))
+    commands = rows["/control/mpc_command"]
+    assert len(commands) > 200
+    for _log, pub, stamp in commands:
+        assert pub >= sent_state[stamp], "a command sent before the state it answers"
     states = rows["/vehicle/state"]
     assert len(states) > 200
     lag = np.array([log - stamp for log, _p, stamp in states])

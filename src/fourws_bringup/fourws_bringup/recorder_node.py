@@ -9,15 +9,14 @@ re-encode) and the QoS its publisher offers (the topic table's QoS kind,
 message to ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`, with
 rosbag2's log time: ``log_time`` = receive time on the node's clock (with ``use_sim_time``,
 as ``ros2 bag record --use-sim-time``: ``fourws run`` sets it in lockstep, so ``ros2 bag
-play`` replays the run at the simulated rate). ``publish_time`` is the wall receive time:
-rosbag2 writes the publisher's send time (DDS's message info), but rclpy's EventsExecutor
-(Jazzy) cannot hand message info to a callback, and the single-threaded executor that can
-was too slow for the recorder on two loaded cores (it lost 185 of 1044 steps); the wall
-receive time is the send time plus one delivery, and MCAP allows the log time where the
-publish time is unknown. ``sequence`` counts the topic's messages. ``custom_data`` in
-``metadata.yaml`` (and in its copy inside the MCAP) says which (``fourws_log_time``:
-``ros_time`` or ``sim_time``; ``fourws_publish_time``: ``wall_receive_time``), so readers
-tell these bags from older ones (wall receive log times, header stamps as publish times).
+play`` replays the run at the simulated rate). ``publish_time`` is the publisher's send time and
+``sequence`` the publisher's sequence number, both from DDS's message info, as rosbag2 writes
+them: the recorder's subscriptions are taken on a thread of their own
+(:mod:`fourws_bringup.info_taker`; rclpy's EventsExecutor cannot hand message info to a
+callback). ``custom_data`` in ``metadata.yaml`` (and in its copy inside the MCAP) says which
+(``fourws_log_time``: ``ros_time`` or ``sim_time``; ``fourws_publish_time``: ``send_time``), so
+readers tell these bags from older ones (``wall_receive_time``; before that, header stamps as
+publish times).
 
 Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
 messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten with the
@@ -77,6 +76,7 @@ from fourws_common.topics import (
 from .bag.errors import BagError
 from .bag.schema import cdr_stamp_ns
 from .bag.writer import BagWriter
+from .info_taker import InfoTaker
 
 #: QoS kinds of the graph's topics that carry one message per step, stamped with the step.
 PER_STEP_KINDS = ("control", "clock")
@@ -236,7 +236,7 @@ class RecorderNode(Node):
         classes = {info.name: message_class(info.type) for info in infos}
         sim = bool(self.get_parameter("use_sim_time").value)
         custom = {"fourws_log_time": "sim_time" if sim else "ros_time",
-                  "fourws_publish_time": "wall_receive_time",
+                  "fourws_publish_time": "send_time",
                   "fourws_namespace": self.get_namespace()}
         try:
             self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
@@ -245,6 +245,7 @@ class RecorderNode(Node):
         except (BagError, OSError) as exc:
             raise ValueError(f"output_dir: cannot create the bag: {exc}") from exc
         self.context.on_shutdown(self.finalise)
+        self.taker = InfoTaker(self)
         self.received = 0
         self._last_rx = time.monotonic()
         self.lost: dict[str, int] = {}  # DDS's message-lost totals
@@ -264,6 +265,7 @@ class RecorderNode(Node):
         for info in infos:
             if info is not self._pending_gate:
                 self._subscribe(info.name)
+        self.taker.start()
         self.create_timer(0.05, self._check_stop,
             clock=RclClock(clock_type=ClockType.STEADY_TIME))  # also under use_sim_time
         self.get_logger().info(
@@ -279,9 +281,9 @@ class RecorderNode(Node):
         def on_matched(info) -> None:
             self.matched[topic] = int(info.current_count)
 
-        self.create_subscription(
-            self._classes[topic], topic, self._callback(topic), self._profiles[topic],
-            raw=True, event_callbacks=SubscriptionEventCallbacks(
+        self.taker.subscribe(
+            self._classes[topic], topic, self._profiles[topic], self._callback(topic),
+            event_callbacks=SubscriptionEventCallbacks(
                 message_lost=self._lost_callback(topic), matched=on_matched))
 
     def _check_gate(self) -> None:
@@ -326,9 +328,10 @@ class RecorderNode(Node):
 
         clock = self.get_clock()
 
-        def on_message(data: bytes) -> None:
+        def on_message(data: bytes, info: dict) -> None:
             now = clock.now().nanoseconds  # rosbag2's receive time: the node's clock
-            wall = time.time_ns()
+            sent = info.get("source_timestamp") or time.time_ns()
+            seq = info.get("publication_sequence_number")
             self._last_rx = time.monotonic()
             with self._lock:
                 if self._finalised or self.writer is None:
@@ -337,7 +340,7 @@ class RecorderNode(Node):
                     stamp = cdr_stamp_ns(data)
                     if stamp is not None and stamp >= 0:
                         gaps.add(stamp)
-                self.writer.write(topic, data, now, wall)
+                self.writer.write(topic, data, now, sent, seq)
                 self.received += 1
         return on_message
 
@@ -361,6 +364,11 @@ class RecorderNode(Node):
             self.done = True  # a second signal: stop draining
 
     def _check_stop(self) -> None:
+        if self.taker.error is not None and not self.done:
+            self.get_logger().error(f"the message taker failed ({self.taker.error!r}): "
+                                    "closing the bag with what it holds")
+            self.done = True
+            return
         self._check_gate()
         if self._stop_requested_at is None or self.done:
             return
@@ -385,6 +393,7 @@ class RecorderNode(Node):
                                f"{lost}")
 
     def destroy_node(self) -> None:
+        self.taker.stop()
         self.finalise()
         super().destroy_node()
 

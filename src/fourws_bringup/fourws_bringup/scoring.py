@@ -187,8 +187,8 @@ LATENCY_STAGES = (
 
 def step_latencies_ms(run) -> dict[str, dict[str, float]]:
     """Where each step's wall time goes, from the messages' wall times (``wall_ns``: the
-    recorder's wall receive times; its own delivery delay cancels in each difference up to
-    its jitter): per stage of the
+    publishers' send times; in older bags the recorder's wall receive times, whose own
+    delivery delay cancels in each difference up to its jitter): per stage of the
     lockstep chain (state → MPC command → wheel torques → next state), the median and 90th
     percentile in ms over the steps that have both ends. Empty for a bag without them or
     with fewer than two steps."""

@@ -107,8 +107,9 @@ class RunData:
     Each per-topic dict has ``stamp_ns`` (int64), ``t_s``, ``log_ns`` (int64, the recorder's
     receive time on its clock: simulated in a lockstep run of this version, wall in older
     bags), ``wall_ns`` (int64: the wall time of the message, the bag's ``publish_time`` where
-    ``custom_data.fourws_publish_time`` says it is one, else the log time of an older bag,
-    which was the wall receive time; what step latencies are measured on) and one array per
+    ``custom_data.fourws_publish_time`` says it is one (the send time; the wall receive time
+    in bags of 2026-12-02), else the log time of an older bag, which was the wall receive
+    time; what step latencies are measured on) and one array per
     message field (scalars ``(n,)``, wheel arrays ``(n, 4)``, strings as object arrays), one
     row per header stamp (the first message of each stamp), sorted by stamp. A topic absent
     from the bag gives a dict with empty ``stamp_ns``/``t_s``/``log_ns``/``wall_ns`` only.

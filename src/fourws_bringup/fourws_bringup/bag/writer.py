@@ -2,11 +2,11 @@
 
 A message's ``log_time`` is when the recorder received it on its node clock (simulated time
 under ``use_sim_time``, so ``ros2 bag play`` paces a lockstep run at the simulated rate, as
-rosbag2 does); its ``publish_time`` what the caller passes (the recorder: the wall receive
-time), else the header stamp (or a ``builtin_interfaces/Time`` first field, as in
+rosbag2 does); its ``publish_time`` what the caller passes (the recorder: the publisher's
+send time), else the header stamp (or a ``builtin_interfaces/Time`` first field, as in
 ``/clock``) read straight from the CDR bytes, else the log time; its ``sequence`` what the
-caller passes, else the count of the topic's messages. Schemas
-carry the full ``ros2msg`` text and channels ``offered_qos_profiles`` and
+caller passes (the recorder: the publisher's sequence number), else the count of the
+topic's messages. Schemas carry the full ``ros2msg`` text and channels ``offered_qos_profiles`` and
 ``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`).
 """
 
