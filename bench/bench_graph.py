@@ -11,6 +11,9 @@ Usage: python bench/bench_graph.py [OUT.json]   (default bench/results_graph.jso
    each process layout (``--compose none``, ``control``, ``all``; interleaved, ``ROUNDS``
    rounds, since this shared machine's speed drifts within minutes): the real-time factor,
    the MPC step inside the node and ``step_latency_ms`` (per chain stage, from the bag).
+3. ``in_process``: the same run in the in-process loop (``run_closed_loop``, the same cores
+   the graph reproduces), in the same rounds, so each layout's RTF is compared with the
+   in-process RTF of the same minutes (``rtf_ratio``: median graph RTF / median in-process).
 
 Both run in a domain of their own (the supervisor's DomainLease). Needs the built
 workspace (``source ros_ws/env.sh``).
@@ -110,6 +113,26 @@ def bench_run(layout: str) -> dict:
     return {"run": "improved@dlc_60_mu05", "compose": layout, **{k: m.get(k) for k in keys}}
 
 
+def bench_in_process() -> dict:
+    """Wall time of the in-process loop on the same run (scenario load included, as
+    ``fourws run`` includes its start)."""
+    code = textwrap.dedent("""
+        import json, sys, time
+        import fourws_common
+        t0 = time.perf_counter()
+        from fourws_bringup.core.closed_loop import run_closed_loop
+        log = run_closed_loop("dlc_60_mu05", "improved")
+        wall = time.perf_counter() - t0
+        sim = log.steps * 0.01
+        print(json.dumps({"steps": log.steps, "sim_time_s": sim, "wall_time_s": wall,
+                          "real_time_factor": sim / wall}))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,  # noqa: S603
+                       text=True)
+    return {"run": "improved@dlc_60_mu05", "compose": "in_process",
+            **json.loads(r.stdout.strip().splitlines()[-1])}
+
+
 def main(out: str) -> int:
     from fourws_bringup.supervisor import DomainLease
 
@@ -121,8 +144,11 @@ def main(out: str) -> int:
               f"(p90 {hop['round_trip_us_p90']:.0f}): {hop['stage_floor_ms']:.2f} ms per stage")
     finally:
         lease.release()
-    runs = []
+    runs, in_process = [], []
     for _ in range(ROUNDS):
+        ip = bench_in_process()
+        in_process.append(ip)
+        print(f"in-process loop: RTF {ip['real_time_factor']:.2f}")
         for layout in LAYOUTS:
             run = bench_run(layout)
             runs.append(run)
@@ -130,7 +156,14 @@ def main(out: str) -> int:
             print(f"run --compose {layout:7s}: RTF {run['real_time_factor']:.2f}, step median "
                   f"{lat.get('step', {}).get('p50', float('nan')):.2f} ms, MPC step in the "
                   f"node median {run['mpc_solve_ms_p50']:.2f} ms")
-    Path(out).write_text(json.dumps({"hop": hop, "runs": runs}, indent=2) + "\n")
+    ip_rtf = float(np.median([r["real_time_factor"] for r in in_process]))
+    ratio = {layout: float(np.median([r["real_time_factor"] for r in runs
+                                      if r["compose"] == layout])) / ip_rtf
+             for layout in LAYOUTS}
+    print("graph RTF / in-process RTF: " + ", ".join(f"{k} {v:.2f}" for k, v in ratio.items()))
+    Path(out).write_text(json.dumps({"hop": hop, "runs": runs, "in_process": in_process,
+                                     "in_process_rtf_median": ip_rtf, "rtf_ratio": ratio},
+                                    indent=2) + "\n")
     return 0
 
 

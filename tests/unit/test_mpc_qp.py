@@ -319,6 +319,46 @@ def test_daqp_reports_infeasibility_and_refuses_bad_data():
     assert not sol.ok and sol.code is S.QpStatus.INVALID_DATA
 
 
+@pytest.mark.parametrize("n_p,n_c", [(5, 2), (12, 6), (30, 10)])
+def test_the_rows_handed_over_as_simple_bounds_are_the_identity(n_p, n_c):
+    """DAQP gets the layout's first ``pattern.simple`` rows as bounds on z itself: they must
+    be I, so that l ≤ z ≤ u is the same constraint as l ≤ A z ≤ u on those rows."""
+    inst = Q.QpLayout(n_p, n_c)
+    nz = inst.pattern.simple
+    assert nz == inst.nz
+    mask = inst._a_mask()
+    np.testing.assert_array_equal(mask[:nz], np.eye(nz, dtype=bool))
+    np.testing.assert_array_equal(inst.A[:nz], np.eye(nz))
+
+
+@pytest.mark.parametrize("bad", ["nan_q", "inf_a", "nan_lo", "inf_lo", "neg_inf_hi", "l_gt_u",
+                                 "overflow"])
+def test_the_data_check_finds_every_bad_entry(bad):
+    """The fast path (sums) and the whole check agree: every kind of bad entry is found,
+    and finite data whose sum overflows is still accepted."""
+    rng = np.random.default_rng(3)
+    q, P, A = rng.normal(size=5), rng.normal(size=(5, 5)), rng.normal(size=(8, 5))
+    lo, hi = -np.ones(8), np.ones(8)
+    lo[0], hi[1] = -np.inf, np.inf
+    if bad == "nan_q":
+        q[2] = np.nan
+    elif bad == "inf_a":
+        A[3, 1] = -np.inf
+    elif bad == "nan_lo":
+        lo[4] = np.nan
+    elif bad == "inf_lo":
+        lo[5] = np.inf
+    elif bad == "neg_inf_hi":
+        hi[6] = -np.inf
+    elif bad == "l_gt_u":
+        lo[7] = 2.0
+    else:
+        P[0, 0] = P[1, 1] = 1.7e308
+        assert S.invalid_data(q, lo, hi, P, A) == ""
+        return
+    assert S.invalid_data(q, lo, hi, P, A) != ""
+
+
 def test_the_closed_loop_with_daqp_follows_the_osqp_one_within_solver_tolerance():
     from fourws_bringup.core.closed_loop import run_closed_loop
 

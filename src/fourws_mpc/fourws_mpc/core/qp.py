@@ -180,7 +180,9 @@ class QpLayout:
         mask = self._a_mask()
         a_rows, a_cols = _csc_order(*np.nonzero(mask))
         self.m = mask.shape[0]
-        self.pattern = QpPattern((n_p, n_c), nz, self.m, p_rows, p_cols, a_rows, a_cols)
+        # rows 0..nz−1 are I: the Δũ box and ε ≥ 0 (bounds on z itself)
+        self.pattern = QpPattern((n_p, n_c), nz, self.m, p_rows, p_cols, a_rows, a_cols,
+                                 simple=nz)
         self.uses = 0
         # constant parts of the dense constraint matrix (rows as in _a_mask)
         ncol = nu * n_c

@@ -100,6 +100,7 @@ class QpPattern:
     p_cols: np.ndarray
     a_rows: np.ndarray
     a_cols: np.ndarray
+    simple: int = 0              # leading rows of A that are I (nz): bounds on z itself
 
 
 @dataclass
@@ -159,10 +160,14 @@ def invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, *matrices: np.nd
     non-finite q, P or A entry, a NaN or +inf lower / -inf upper bound, or l > u (the bounds
     clipped to ±OSQP_INFTY first, as OSQP's wrapper does)."""
     for name, v in zip(("q", "P", "A"), (q, *matrices), strict=False):
-        if not np.all(np.isfinite(v)):
+        # fast path: a finite sum has no NaN and no ±inf term (an overflow is checked whole)
+        if not np.isfinite(np.add.reduce(v, axis=None)) and not np.all(np.isfinite(v)):
             return f"non-finite {name}"
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo == _INF) or \
-            np.any(hi == -_INF):
+    # a sum is NaN if a term is (or if it holds both infinities: then checked whole)
+    if (np.isnan(np.add.reduce(lo)) or np.isnan(np.add.reduce(hi))) and (
+            np.any(np.isnan(lo)) or np.any(np.isnan(hi))):
+        return "bad bounds"
+    if lo.max(initial=-_INF) == _INF or hi.min(initial=_INF) == -_INF:
         return "bad bounds"
     if np.any(np.maximum(lo, -OSQP_INFTY) > np.minimum(hi, OSQP_INFTY)):
         return "l > u"
@@ -277,8 +282,11 @@ class DaqpSolver:
         hi = np.minimum(qp.hi, DAQP_INF)
         lo = np.maximum(qp.lo, -DAQP_INF)
         sense = np.zeros(len(hi), dtype=np.int32)
+        # the pattern's leading identity rows go to DAQP as simple bounds on z (bounds
+        # longer than A's rows: the first ones bound z), which it handles without a row
+        A = qp.A[qp.pattern.simple:] if qp.pattern.simple == nz else qp.A
         x, _fval, flag, info = daqp.solve(P, np.ascontiguousarray(qp.q, dtype=float),
-                                          np.ascontiguousarray(qp.A, dtype=float), hi, lo,
+                                          np.ascontiguousarray(A, dtype=float), hi, lo,
                                           sense, iter_limit=self.settings.max_iter)
         status = _DAQP_STATUS.get(int(flag), QpStatus.UNSOLVED)
         x = np.asarray(x, dtype=float) if x is not None else None
