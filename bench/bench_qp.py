@@ -20,11 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-for pkg in ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", "fourws_bringup"):
-    p = str(ROOT / "src" / pkg)
-    if p not in sys.path:
-        sys.path.insert(0, p)
+import _src_path  # noqa: E402, F401, I001 - first: the package sources on sys.path
 
 # isort: off
 import fourws_common  # noqa: E402, F401 - first: the BLAS thread default
