@@ -163,3 +163,29 @@ def test_the_margins_gain_is_the_controllers_first_move_with_compensation(contro
     res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
     assert not res.fallback
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
+
+
+def _rho(A):
+    return float(np.abs(np.linalg.eigvals(A)).max())
+
+
+@pytest.mark.parametrize(("controller", "world"), [
+    ("lqr_ff", {}), ("mpc_4ws", {"delay_periods": 1, "steer_dead_time_s": 0.04}),
+    ("mpc_fws", {"delay_periods": 1, "steer_dead_time_s": 0.04})])
+def test_gain_margin_is_the_actuator_gain_that_destabilises_the_loop(controller, world):
+    """The loop is broken at the plant's input: an actuator gain k (every front steer command
+    reaches the plant × k, the controller's memory of what it sent unscaled) closes the loop
+    A_open + k B K. At k = 1 that is the closed loop; ρ crosses 1 between 0.97 and 1.03 of
+    the upper gain margin's factor. (Presets with δr and Mz have a motionless mode at 1,
+    counter-steer held by the yaw moment, that an actuator gain error moves off 1 by
+    ~1e-3; they are left out here.)"""
+    from fourws_bringup.core.margins import closed_loop
+
+    cfg = load_mpc_config(controller, {"input_delay_periods": world.get("delay_periods", 0),
+                                       "steer_dead_time_s": world.get("steer_dead_time_s", 0.0)})
+    A_cl, A_o, B, K = closed_loop(cfg, V, 60 / 3.6, **world)
+    np.testing.assert_allclose(A_o + B @ K, A_cl, atol=1e-12)
+    m = margins(cfg, V, 60 / 3.6, **world)
+    assert m.gain_margin_db is not None and m.gain_margin_db > 0.0
+    g = 10.0 ** (m.gain_margin_db / 20.0)
+    assert _rho(A_o + 0.97 * g * B @ K) < 1.0 < _rho(A_o + 1.03 * g * B @ K)

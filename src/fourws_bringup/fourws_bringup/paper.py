@@ -163,7 +163,7 @@ def margins_line(scenario: str, controllers: list[str], world: str = "ideal") ->
                     sc.speed_mps, delay_periods=cond.delay_periods,
                     steer_dead_time_s=cond.steer_dead_time_s)
         pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
-        gm = "n/a" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
+        gm = "∞" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
         parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, GM {gm}, "
                      f"PM {pm})")
     return (f"Linearised loop at {sc.speed_mps * 3.6:.0f} km/h, {world} (`fourws margins`, "

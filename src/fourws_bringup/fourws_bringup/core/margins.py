@@ -35,9 +35,13 @@ actuator, delay and memory modes; distance along the path and speed are not in i
 
 Results: ``spectral_radius`` (largest |eigenvalue| of the closed loop per period: > 1 grows,
 the growth per second is ρ^(1/T)), ``frequency_hz`` of that pole, and the gain and phase
-margins of the loop broken at the front steer command (``gain_margin_db``,
-``phase_margin_deg``: the open loop L(e^{jωT}) from the commanded front steer back to the
-controller's front steer output, in negative feedback).
+margins of the loop broken at the front steer command, at the plant's input
+(``gain_margin_db``, ``phase_margin_deg``: the open loop L(e^{jωT}) from the commanded front
+steer back to the controller's front steer output, in negative feedback; the controller's own
+states, its memory of the commands it sent, stay closed, as in the car: a gain error of the
+actuator does not scale what the controller remembers having sent). ``gain_margin_db`` is
+the upper margin: the smallest gain increase that puts L through −1 (> 0 dB). Crossings
+below 0 dB (a gain decrease; the MPC's u = u(k−1) + Δu is an integrator) are not reported.
 """
 
 from __future__ import annotations
@@ -249,10 +253,10 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     A[:N_PLANT, :N_PLANT] += Ap
     A[:N_PLANT] += Bp @ applied
     Bw[:N_PLANT] += Bp @ applied_w
-    # controller memory: u(k−1) of the next step = this step's output (closed on δ_f's
-    # injection in the open loop); older commands shift down the buffer
-    A[i_mem:i_mem + N_INPUT] += C_cmd
-    Bw[i_mem:i_mem + N_INPUT] += w_f
+    # controller memory: u(k−1) of the next step = the command this step computed, its own
+    # output C_u ξ (not the injected δ_f: the break is at the plant's input, the controller's
+    # internal states stay closed); older commands shift down the buffer
+    A[i_mem:i_mem + N_INPUT] += C_u
     for j in range(N_INPUT, n_mem, N_INPUT):
         A[i_mem + j:i_mem + j + N_INPUT, i_mem + j - N_INPUT:i_mem + j] = np.eye(N_INPUT)
     A_open = A
@@ -291,10 +295,11 @@ def _dominant_pole(A_cl: np.ndarray, dt: float) -> tuple[float, float]:
 
 def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float
                   ) -> tuple[float | None, float | None]:
-    """GM (dB) and PM (deg) of L(z) = −K (zI − A)⁻¹ B in negative feedback (the loop closes
-    with w = K x, i.e. positive feedback of K(zI−A)⁻¹B), on 0.01 rad/s .. Nyquist: the
-    smallest gain margin over the phase crossovers (L real and negative) and the smallest
-    phase margin over the gain crossovers (|L| = 1); None where there is no crossover."""
+    """(upper GM dB, PM deg) of L(z) = −K (zI − A)⁻¹ B in negative feedback (the loop closes
+    with w = K x, i.e. positive feedback of K(zI−A)⁻¹B), on 0.01 rad/s .. Nyquist: over the
+    phase crossovers (L real and negative, at −a) the gain 1/a puts L through −1; the gain
+    margin is the smallest such gain above 1; the phase margin is the smallest over the gain
+    crossovers (|L| = 1). None where there is no such crossover."""
     w = np.logspace(-2, math.log10(math.pi / dt * 0.999), 6000)
     eye = np.eye(A.shape[0])
     L = np.array([-(K @ np.linalg.solve(np.exp(1j * om * dt) * eye - A, B))[0, 0]
@@ -307,6 +312,6 @@ def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float
             gms.append(-20.0 * math.log10(max(abs(a.real + t * (b.real - a.real)), 1e-300)))
         if (abs(a) - 1.0) * (abs(b) - 1.0) <= 0.0 and abs(a) != abs(b):
             pms.append(math.degrees(math.atan2(b.imag, b.real)) + 180.0)
-    gm = min(gms, key=abs) if gms else None
+    upper = min((g for g in gms if g > 0.0), default=None)
     pm = min(((p + 180.0) % 360.0 - 180.0 for p in pms), key=abs) if pms else None
-    return gm, pm
+    return upper, pm
