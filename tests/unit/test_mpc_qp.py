@@ -187,7 +187,7 @@ def test_hard_state_bounds_hold_and_infeasibility_is_reported():
 
 def test_one_warm_started_instance_per_horizon_pair():
     z, u, Ak, Bk, dk = _model(8)
-    qp = Q.MpcQp()
+    qp = Q.MpcQp(solver=S.OsqpSolver(S.QpSettings()))
     args = (np.array([50.0, 40.0]), np.array([1e4, 1e4, 1e-4]), 1e3, _bounds())
     ref = np.zeros((30, 2))
     qp.solve(Ak, Bk, dk, z, u, ref[:12], 12, 6, *args)
@@ -244,7 +244,7 @@ def test_injected_solver_gets_the_condensed_qp_and_gives_the_same_answer():
     ref = np.zeros((12, 2))
     rec = _RecordingSolver()
     a = Q.MpcQp(solver=rec).solve(Ak, Bk, dk, z, u, ref, 12, 6, *args)
-    b = Q.MpcQp().solve(Ak, Bk, dk, z, u, ref, 12, 6, *args)
+    b = Q.MpcQp(solver=S.OsqpSolver(S.QpSettings())).solve(Ak, Bk, dk, z, u, ref, 12, 6, *args)
     assert rec.prepared == [(12, 6)]
     qp = rec.seen[0]
     assert qp.H.shape == (18, 18) and qp.A.shape == (qp.pattern.m, 19)

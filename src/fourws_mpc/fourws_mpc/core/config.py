@@ -165,11 +165,12 @@ class MpcConfig:
     lqr_steer_max_deg: float = param(5.0, "Bryson maximum of the front steer angle",
                                      lo=1e-3, hi=90.0, unit="deg")
     # solver
-    qp_solver: str = param("osqp", "QP solver behind the solver seam (qp_solver.QP_SOLVERS)",
+    qp_solver: str = param("daqp", "QP solver behind the solver seam (qp_solver.QP_SOLVERS)",
                            choices=tuple(QP_SOLVERS))
     osqp_eps_abs: float = param(1e-4, "OSQP absolute tolerance", lo=1e-10, hi=1.0)
     osqp_eps_rel: float = param(1e-4, "OSQP relative tolerance", lo=1e-10, hi=1.0)
-    osqp_max_iter: int = param(4000, "OSQP iteration limit", lo=10, hi=1000000)
+    osqp_max_iter: int = param(4000, "iteration limit of the QP solver (OSQP: ADMM "
+                               "iterations; DAQP: active-set changes)", lo=10, hi=1000000)
     osqp_polishing: bool = param(False, "OSQP solution polishing")
     osqp_check_termination: int = param(5, "OSQP checks convergence every this many "
                                         "iterations", lo=1, hi=1000)

@@ -1,4 +1,4 @@
-"""Augmented Δu MPC of eq. (5)-(6), cost eq. (16)-(19), constraints eq. (20); solved with OSQP.
+"""Augmented Δu MPC of eq. (5)-(6), cost eq. (16)-(19), constraints eq. (20), condensed to one QP.
 
 Augmented model, eq. (5), with the affine term of the linearisation (``model.discretise``)::
 
@@ -29,7 +29,7 @@ by the squares of the characteristic sizes of the cost scaling, see ``cost_scali
 variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
 increment is in [−1, 1] and the problem is well scaled; ε ≥ 0 is one dimensionless slack.
 
-Constraints, eq. (20) and section 3.1.5 (rows of the OSQP matrix, in this order)::
+Constraints, eq. (20) and section 3.1.5 (rows of the constraint matrix, in this order)::
 
     −1 ≤ Δũ_j ≤ 1                         (0 ≤ Δũ ≤ 0 for a disabled input: δr or Mz ≡ 0)
     0 ≤ ε
@@ -54,7 +54,7 @@ import numpy as np
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
 from fourws_mpc.core.qp_solver import (
     CondensedQp,
-    OsqpSolver,
+    DaqpSolver,
     QpPattern,
     QpSettings,
     QpSolver,
@@ -246,7 +246,7 @@ class MpcQp:
     def __init__(self, settings: QpSettings | None = None, solver: QpSolver | None = None
                  ) -> None:
         self.settings = settings if settings is not None else QpSettings()
-        self.solver: QpSolver = solver if solver is not None else OsqpSolver(self.settings)
+        self.solver: QpSolver = solver if solver is not None else DaqpSolver(self.settings)
         self.instances: dict[tuple[int, int], QpLayout] = {}
         self._C: dict[int, np.ndarray] = {N_STATE: output_matrix()}   # per state dimension
 
