@@ -71,3 +71,17 @@ def test_ratios_lie_in_unit_interval_and_grid_is_exact_at_nodes(fw):
     direct = mamdani(np.array(fw.gy[iy]), np.array(fw.gp[ip]))
     np.testing.assert_allclose(fw.ratios(fw.gy[iy], math.radians(fw.gp[ip])), direct,
                                atol=1e-9)
+
+
+def test_controllers_with_one_spec_share_one_read_only_surface():
+    """The response surface is built once per spec and process (a sweep builds a controller
+    per run); nobody can change it under another controller."""
+    import dataclasses
+
+    from fourws_mpc.core.fuzzy_weights import FuzzySpec, FuzzyWeights
+
+    a, b = FuzzyWeights(FuzzySpec()), FuzzyWeights(FuzzySpec())
+    assert a.surfaces is b.surfaces and not a.surfaces.flags.writeable
+    other = FuzzyWeights(dataclasses.replace(FuzzySpec(), e_y_range_m=1.0))
+    assert other.surfaces is not a.surfaces
+    assert other.ratios(0.5, 0.0)[0] != a.ratios(0.5, 0.0)[0]

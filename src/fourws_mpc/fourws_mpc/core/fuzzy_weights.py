@@ -25,6 +25,7 @@ eq. (23): Q_Y = r_QY Q_Y,max, Q_φ = r_Qφ Q_φ,max, R_Δδ = r_RΔδ R_Δδ,max
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -134,6 +135,20 @@ def mamdani(e_y: np.ndarray, e_phi_deg: np.ndarray, spec: FuzzySpec | None = Non
     return out.reshape((len(OUTPUT_NAMES), *shape))
 
 
+@functools.lru_cache(maxsize=8)
+def response_surfaces(spec: FuzzySpec) -> np.ndarray:
+    """The four ratios of :func:`mamdani` on the spec's (grid_y × grid_phi) grid, shape
+    (4, ny, nφ), read-only. Cached per spec (a frozen dataclass): every controller built in a
+    process with the same spec shares one surface (building it costs ~0.2 s; a sweep builds
+    a controller per run)."""
+    gy = np.linspace(-spec.e_y_range_m, spec.e_y_range_m, spec.grid_y)
+    gp = np.linspace(-spec.e_phi_range_deg, spec.e_phi_range_deg, spec.grid_phi)
+    EY, EP = np.meshgrid(gy, gp, indexing="ij")
+    surfaces = mamdani(EY, EP, spec)
+    surfaces.flags.writeable = False
+    return surfaces
+
+
 class FuzzyWeights:
     """Precomputed response surfaces of Tables 1-4 with bilinear online interpolation."""
 
@@ -142,8 +157,7 @@ class FuzzyWeights:
         s = self.spec
         self.gy = np.linspace(-s.e_y_range_m, s.e_y_range_m, s.grid_y)
         self.gp = np.linspace(-s.e_phi_range_deg, s.e_phi_range_deg, s.grid_phi)
-        EY, EP = np.meshgrid(self.gy, self.gp, indexing="ij")
-        self.surfaces = mamdani(EY, EP, s)                                   # (4, ny, np)
+        self.surfaces = response_surfaces(s)                                 # (4, ny, np)
         self._hy = self.gy[1] - self.gy[0]
         self._hp = self.gp[1] - self.gp[0]
 

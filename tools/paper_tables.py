@@ -1,0 +1,134 @@
+"""Tables 6-8 in both worlds from a robustness sweep: median (worst) over seeds, margins,
+and the ranges the fuzzy weights and the horizons covered.
+
+Usage (after ``source ros_ws/env.sh``; ``python tools/make_benchmark.py`` writes the CSV)::
+
+    python tools/paper_tables.py runs/benchmark/results.csv > tables.md
+
+The paper scenarios are the bench's ``bench_dlc_60_mu05`` / ``bench_dlc_90_mu06`` (the
+paper's lane changes with a 30 s lead-out: every figure covers the lead-out too). The ideal
+world is the sweep's ``ideal`` condition (deterministic: one run), the realistic world its
+``all`` condition (``config/conditions/realistic.yaml``, seeds 0-4). ``lqr_ff`` is added to
+Tables 6 and 7 as the outside reference. Margins come from ``core.margins`` at the
+scenario's speed: the ideal loop, and 1 period of delay plus 40 ms of steering dead time
+told to the controller for the realistic world (the sensing noise and the estimated tyre
+forces are not in a linear margin).
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fourws_bringup.paper import T67_KEYS, TABLES, rank, tie_groups
+
+#: world -> (sweep condition, delay periods, steer dead time s) for the margins
+WORLDS = {"ideal": ("ideal", 0, 0.0), "realistic": ("all", 1, 0.04)}
+BENCH = {"dlc_60_mu05": "bench_dlc_60_mu05", "dlc_90_mu06": "bench_dlc_90_mu06"}
+SPEED_KMH = {"dlc_60_mu05": 60.0, "dlc_90_mu06": 90.0}
+RANGES = (("q_Y", "q_y"), ("q_φ", "q_phi"), ("r_Δδ", "r_ddelta"), ("r_ΔMz", "r_dmz"),
+          ("N_p", "np"), ("N_c", "nc"))
+FUZZY = {"improved", "ampc_4ws", "ampc_4ws_dyc"}
+
+
+def read_rows(path: str | Path) -> list[dict[str, str]]:
+    with open(path, encoding="utf-8", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def pick(rows: list[dict[str, str]], controller: str, scenario: str, condition: str
+         ) -> list[dict[str, str]]:
+    """The rows of one controller on one paper scenario (by the bench file's stem)."""
+    stem = BENCH[scenario]
+    return [r for r in rows if r["controller"] == controller and r["condition"] == condition
+            and Path(r["scenario"]).stem == stem]
+
+
+def median_worst(rows: list[dict[str, str]], key: str) -> tuple[float, float]:
+    """(median, worst = largest) of ``key`` over the completed runs; NaN when none."""
+    v = [float(r[key]) for r in rows if r["completed"] == "True" and r.get(key, "") != ""]
+    return (float(np.median(v)), max(v)) if v else (float("nan"), float("nan"))
+
+
+def _cell(m: float, w: float, n: int) -> str:
+    return f"{m:.4f}" if n == 1 else f"{m:.4f} ({w:.4f})"
+
+
+def margin_text(controller: str, scenario: str, world: str) -> str:
+    from fourws_bringup.core.configs import load_mpc_config
+    from fourws_bringup.core.margins import margins
+    from fourws_sim.core.scenario import load_scenario
+
+    _, n_d, dead = WORLDS[world]
+    cfg = load_mpc_config(controller, {"input_delay_periods": n_d, "steer_dead_time_s": dead})
+    m = margins(cfg, load_scenario(scenario).vehicle, SPEED_KMH[scenario] / 3.6,
+                delay_periods=n_d, steer_dead_time_s=dead)
+    gm = "∞" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
+    pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
+    return f"{m.spectral_radius:.4f} / {gm} / {pm}"
+
+
+def ranges_text(rows: list[dict[str, str]], controller: str) -> str:
+    parts = []
+    for label, key in RANGES:
+        if label.startswith(("q", "r")) and controller not in FUZZY:
+            continue
+        lo = [float(r[f"{key}_min"]) for r in rows if r.get(f"{key}_min", "") != ""]
+        hi = [float(r[f"{key}_max"]) for r in rows if r.get(f"{key}_max", "") != ""]
+        if lo and hi and max(hi) > 0:        # lqr_ff has neither weights nor horizons
+            a, b = min(lo), max(hi)
+            parts.append(f"{label} {a:.0f}" if round(a) == round(b) else
+                         f"{label} {a:.0f}-{b:.0f}")
+    return ", ".join(parts)
+
+
+def tables(rows: list[dict[str, str]], margins: bool = True) -> str:
+    out = []
+    for world, (cond, _, _) in WORLDS.items():
+        out += [f"## {world} world (sweep condition `{cond}`)", ""]
+        for title, scenario, paper, keys, heads in TABLES:
+            ctrls = list(paper) + (["lqr_ff"] if keys is T67_KEYS else [])
+            out += [f"### {title} ({world})", "",
+                    "| controller | source | " + " | ".join(h.replace("|", "\\|") for h in heads)
+                    + " | runs (aborted) | "
+                    + ("ρ / GM / PM | " if margins else "") + "weights and horizons covered |",
+                    "|---|---|" + "---|" * (len(heads) + 2 + int(margins))]
+            medians = {}
+            for c in ctrls:
+                rs = pick(rows, c, scenario, cond)
+                ok = [r for r in rs if r["completed"] == "True"]
+                cells = []
+                for k in keys:
+                    m, w = median_worst(rs, k)
+                    cells.append(_cell(m, w, len(ok)))
+                medians[c] = {"completed": len(ok) == len(rs) and bool(rs),
+                              "max_abs_lateral_error_m": median_worst(rs, keys[0])[0]}
+                mg = f"{margin_text(c, scenario, world)} | " if margins else ""
+                out.append(f"| {c} | fourws | " + " | ".join(cells)
+                           + f" | {len(rs)} ({len(rs) - len(ok)}) | {mg}"
+                           + f"{ranges_text(rs, c)} |")
+                if c in paper:
+                    out.append(f"| {c} | paper | " + " | ".join(f"{v:.5f}" for v in paper[c])
+                               + " | | " + ("| " if margins else "") + "|")
+            order = rank({c: medians[c] for c in paper}, "max_abs_lateral_error_m")
+            groups = tie_groups({c: medians[c] for c in paper}, order,
+                                "max_abs_lateral_error_m")
+            paper_order = sorted(paper, key=lambda c: paper[c][0])
+            out += ["", "Ranking on the median max |eY| (best first; ties within 1 %): "
+                    + " < ".join(" ≈ ".join(g) for g in groups)
+                    + f"; paper {' < '.join(paper_order)}", ""]
+    return "\n".join(out)
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1:
+        print(__doc__, file=sys.stderr)
+        return 2
+    print(tables(read_rows(argv[0])))
+    return 0
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
