@@ -22,6 +22,7 @@ EXPECTED = {
     "ampc_4ws": (True, False, "fuzzy", "apcha", "equal"),
     "ampc_4ws_dyc": (True, True, "fuzzy", "apcha", "rule"),
     "lqr_ff": (False, False, "fixed", "fixed", "equal"),   # the textbook reference (law)
+    "improved_np30": (True, True, "fuzzy", "fixed", "optimal"),   # beyond the paper
 }
 PRESETS = list_controllers()
 
@@ -60,13 +61,21 @@ def test_presets_share_one_cost_scaling_and_constraints():
     switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
                 "law")
     shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
-    mpc = [_preset(n)[0] for n in PRESETS if n != "lqr_ff"]
+    mpc = [_preset(n)[0] for n in PRESETS if n not in ("lqr_ff", "improved_np30")]
     for name in shared:
         assert len({getattr(c, name) for c in mpc}) == 1, name
     lqr = _preset("lqr_ff")[0]
     own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg"}
     for name in set(shared) - own:
         assert getattr(lqr, name) == getattr(mpc[0], name), name
+    # beyond the paper: improved with N_p 30, N_c 10 and its own tuned scaling, else improved
+    long = _preset("improved_np30")[0]
+    improved = _preset("improved")[0]
+    horizon = {"np_baseline", "nc_baseline", "horizons_mode", "controller"}
+    for f in dataclasses.fields(MpcConfig):
+        if f.name not in horizon | {"scale_y_m", "scale_phi_deg"}:
+            assert getattr(long, f.name) == getattr(improved, f.name), f.name
+    assert (long.np_baseline, long.nc_baseline, long.horizons_mode) == (30, 10, "fixed")
 
 
 @pytest.mark.parametrize("key,value", [
