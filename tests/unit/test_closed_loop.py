@@ -12,7 +12,8 @@ from fourws_bringup.core.conditions import load_condition
 from fourws_common.resources import config_dir
 
 ROOT = Path(__file__).resolve().parents[2]
-PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc", "lqr_ff")
+PRESETS = ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws", "ampc_4ws_dyc", "lqr_ff",
+           "improved_np30")   # the last beyond the paper (N_p 30)
 #: the paper scenarios with a 30 s straight lead-out, and where the paper's run ends (X, m)
 BENCH = {"dlc_60_mu05": (ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml", 173.0),
          "dlc_90_mu06": (ROOT / "benchmarks/scenarios/bench_dlc_90_mu06.yaml", 250.0)}

@@ -12,6 +12,10 @@ lockstep with ~15 message deliveries per step over six Python processes on two c
 ``spin_once``; with the events executor the same run (improved on dlc_90_mu06, recorder on)
 went from a real-time factor of 1.37 to 2.25-2.33, with identical results. Set
 ``FOURWS_EXECUTOR=single`` to fall back to the stable executor.
+
+Profiling: with ``FOURWS_PROFILE=DIR`` each process profiles its executor thread with
+cProfile from the first node built to shutdown and writes ``DIR/<node names>.<pid>.prof``
+(read with ``python -m pstats``); off by default (it slows the callbacks).
 """
 
 from __future__ import annotations
@@ -38,6 +42,8 @@ EXECUTORS: dict[str, Callable[[], Executor]] = {
     "events": EventsExecutor,
     "single": SingleThreadedExecutor,
 }
+#: Environment variable naming a folder for per-process cProfile output (module docstring).
+PROFILE_ENV = "FOURWS_PROFILE"
 #: Wall period (s, steady clock) at which ``run_nodes`` checks whether a node has set ``done``.
 DONE_POLL_PERIOD_S = 0.02
 
@@ -84,6 +90,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         signal.signal(sig, on_signal)
     nodes: list[Node] = []
     code = 0
+    profiler = _start_profiler()
     try:
         executor = make_executor()
         for factory in factories:
@@ -121,6 +128,35 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         for node in nodes:
             code = code or getattr(node, "exit_code", 0) or 0
+        _stop_profiler(profiler, [n.get_name() for n in nodes])
+        for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def _start_profiler():
+    """A running ``cProfile.Profile`` when ``$FOURWS_PROFILE`` names a folder, else None."""
+    if not os.environ.get(PROFILE_ENV):
+        return None
+    import cProfile
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    return profiler
+
+
+def _stop_profiler(profiler, names: list[str]) -> None:
+    """Write the profile to ``$FOURWS_PROFILE/<names>.<pid>.prof``; a write error is said,
+    never raised (the run's own exit code stands)."""
+    if profiler is None:
+        return
+    profiler.disable()
+    from pathlib import Path
+
+    path = Path(os.environ[PROFILE_ENV]) / f"{'+'.join(names) or 'none'}.{os.getpid()}.prof"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        profiler.dump_stats(str(path))
+    except OSError as exc:
+        print(f"[warn] profile not written to {path}: {exc}", file=sys.stderr, flush=True)
