@@ -94,13 +94,16 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
 
     spec = Path(__file__).resolve().parents[2] / "benchmarks" / "robustness.yaml"
     jobs = load_spec(spec)
-    assert {j.controller for j in jobs} == {"mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
-                                           "ampc_4ws_dyc", "lqr_ff"}
+    from fourws_bringup.core.configs import list_controllers
+
+    assert sorted({j.controller for j in jobs}) == list_controllers()   # every shipped preset
     noisy = {j.condition.name for j in jobs if j.condition.seed == 4}
     assert noisy == {"noise_gm", "noise_white", "all"}          # five seeds where noise is
     for j in jobs:
         __import__("fourws_sim.core.scenario", fromlist=["load_scenario"]).load_scenario(
             j.scenario)
+    extra = load_spec(spec.parent / "lqr_comparison.yaml")       # the 20-seed comparison
+    assert {j.condition.seed for j in extra} == set(range(20))
 
 
 def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
