@@ -24,12 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fourws_bringup.paper import T67_KEYS, TABLES, rank, tie_groups
+from fourws_bringup.paper import T67_KEYS, TABLES, _world_condition, rank, tie_groups
 
-#: world -> (sweep condition, delay periods, steer dead time s) for the margins
-WORLDS = {"ideal": ("ideal", 0, 0.0), "realistic": ("all", 1, 0.04)}
+#: world of ``fourws paper`` -> the sweep condition that runs it in the bench
+WORLDS = {"ideal": "ideal", "realistic": "all"}
 BENCH = {"dlc_60_mu05": "bench_dlc_60_mu05", "dlc_90_mu06": "bench_dlc_90_mu06"}
-SPEED_KMH = {"dlc_60_mu05": 60.0, "dlc_90_mu06": 90.0}
 RANGES = (("q_Y", "q_y"), ("q_φ", "q_phi"), ("r_Δδ", "r_ddelta"), ("r_ΔMz", "r_dmz"),
           ("N_p", "np"), ("N_c", "nc"))
 FUZZY = {"improved", "ampc_4ws", "ampc_4ws_dyc", "improved_np30"}
@@ -61,14 +60,18 @@ def _cell(m: float, w: float, n: int) -> str:
 
 
 def margin_text(controller: str, scenario: str, world: str) -> str:
+    """ρ / GM / PM at the paper scenario's speed, the world's delays told to the controller
+    (the world's condition, as ``paper.margins_line`` takes it)."""
+    from fourws_bringup.core.conditions import node_parameters
     from fourws_bringup.core.configs import load_mpc_config
     from fourws_bringup.core.margins import margins
     from fourws_sim.core.scenario import load_scenario
 
-    _, n_d, dead = WORLDS[world]
-    cfg = load_mpc_config(controller, {"input_delay_periods": n_d, "steer_dead_time_s": dead})
-    m = margins(cfg, load_scenario(scenario).vehicle, SPEED_KMH[scenario] / 3.6,
-                delay_periods=n_d, steer_dead_time_s=dead)
+    cond = _world_condition(world)
+    sc = load_scenario(scenario)
+    m = margins(load_mpc_config(controller, node_parameters(cond)["mpc_node"]), sc.vehicle,
+                sc.speed_mps, delay_periods=cond.delay_periods,
+                steer_dead_time_s=cond.steer_dead_time_s)
     gm = "∞" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
     pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
     return f"{m.spectral_radius:.4f} / {gm} / {pm}"
@@ -90,7 +93,7 @@ def ranges_text(rows: list[dict[str, str]], controller: str) -> str:
 
 def tables(rows: list[dict[str, str]], margins: bool = True) -> str:
     out = []
-    for world, (cond, _, _) in WORLDS.items():
+    for world, cond in WORLDS.items():
         out += [f"## {world} world (sweep condition `{cond}`)", ""]
         for title, scenario, paper, keys, heads in TABLES:
             ctrls = list(paper) + (list(EXTRA) if keys is T67_KEYS else [])

@@ -135,15 +135,19 @@ def mamdani(e_y: np.ndarray, e_phi_deg: np.ndarray, spec: FuzzySpec | None = Non
     return out.reshape((len(OUTPUT_NAMES), *shape))
 
 
+def surface_grid(spec: FuzzySpec) -> tuple[np.ndarray, np.ndarray]:
+    """The e_Y (m) and e_φ (deg) nodes of the response surfaces, (grid_y,), (grid_phi,)."""
+    return (np.linspace(-spec.e_y_range_m, spec.e_y_range_m, spec.grid_y),
+            np.linspace(-spec.e_phi_range_deg, spec.e_phi_range_deg, spec.grid_phi))
+
+
 @functools.lru_cache(maxsize=8)
 def response_surfaces(spec: FuzzySpec) -> np.ndarray:
     """The four ratios of :func:`mamdani` on the spec's (grid_y × grid_phi) grid, shape
     (4, ny, nφ), read-only. Cached per spec (a frozen dataclass): every controller built in a
     process with the same spec shares one surface (building it costs ~0.2 s; a sweep builds
     a controller per run)."""
-    gy = np.linspace(-spec.e_y_range_m, spec.e_y_range_m, spec.grid_y)
-    gp = np.linspace(-spec.e_phi_range_deg, spec.e_phi_range_deg, spec.grid_phi)
-    EY, EP = np.meshgrid(gy, gp, indexing="ij")
+    EY, EP = np.meshgrid(*surface_grid(spec), indexing="ij")
     surfaces = mamdani(EY, EP, spec)
     surfaces.flags.writeable = False
     return surfaces
@@ -155,8 +159,7 @@ class FuzzyWeights:
     def __init__(self, spec: FuzzySpec | None = None) -> None:
         self.spec = spec if spec is not None else FuzzySpec()
         s = self.spec
-        self.gy = np.linspace(-s.e_y_range_m, s.e_y_range_m, s.grid_y)
-        self.gp = np.linspace(-s.e_phi_range_deg, s.e_phi_range_deg, s.grid_phi)
+        self.gy, self.gp = surface_grid(s)
         self.surfaces = response_surfaces(s)                                 # (4, ny, np)
         self._hy = self.gy[1] - self.gy[0]
         self._hp = self.gp[1] - self.gp[0]
