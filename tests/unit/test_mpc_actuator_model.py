@@ -92,12 +92,12 @@ def test_zero_order_hold_is_exact_for_the_linearisation_and_euler_is_not():
 def test_models_are_registered_and_build_their_measured_state():
     assert {"single_track", "single_track_actuators"} <= set(PREDICTION_MODELS)
     m = make_prediction_model("single_track_actuators", P, "zoh")
-    z = m.measured_state(np.arange(6.0), 0.1, -0.05)
-    assert m.n_state == 8 and z.shape == (8,)
+    z, memory = m.measured_state(np.arange(6.0), 0.1, -0.05)
+    assert m.n_state == 8 and z.shape == (8,) and memory is None
     assert z[A_.DF_ACT] == 0.1 and z[A_.DR_ACT] == -0.05
     assert z[StateIdx.X] == 5.0                           # ζ's indices keep their meaning
     s = make_prediction_model("single_track", P)
-    assert s.n_state == 6 and s.measured_state(np.arange(6.0), 0.1, 0.0).shape == (6,)
+    assert s.n_state == 6 and s.measured_state(np.arange(6.0), 0.1, 0.0)[0].shape == (6,)
     with pytest.raises(ValueError, match="prediction_discretisation"):
         make_prediction_model("single_track", P, "tustin")
 
@@ -118,7 +118,7 @@ def test_qp_takes_the_state_dimension_from_the_model():
     u = np.array([0.01, 0.002, 0.0])
     s6 = make_prediction_model("single_track", fast, "zoh")
     s8 = make_prediction_model("single_track_actuators", fast, "zoh")
-    z8 = s8.measured_state(z6, u[0], u[1])
+    z8, _ = s8.measured_state(z6, u[0], u[1])
     qp = Q.MpcQp()
     args = (np.zeros((12, 2)), 12, 6, np.array([50.0, 40.0]), np.array([1e4, 1e4, 1e-4]),
             1e3, _bounds())
@@ -138,7 +138,8 @@ def test_the_controller_reads_the_measured_road_wheel_angles_only_with_actuator_
     v = 60 / 3.6
     ref = _straight(v)
     base = dict(weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
-    for model, differs in (("single_track", False), ("single_track_actuators", True)):
+    for model, differs in (("single_track", False), ("single_track_actuators", True),
+                           ("single_track_relaxation", True)):
         cfg = MpcConfig(prediction_model=model, prediction_discretisation="zoh", **base)
         out = []
         for steer in (0.0, math.radians(2.0)):

@@ -57,7 +57,8 @@ def test_presets_load(name):
 
 def test_presets_share_one_cost_scaling_and_constraints():
     """The paper's presets differ only in their switches; lqr_ff (another law) shares every
-    key but its own tuned Bryson maxima and the MPC cost it does not have."""
+    key but its own tuned Bryson maxima, the MPC cost it does not have and its delay
+    predictor (the steering lags without the tyre relaxation: its better margin)."""
     switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
                 "law")
     shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
@@ -65,7 +66,9 @@ def test_presets_share_one_cost_scaling_and_constraints():
     for name in shared:
         assert len({getattr(c, name) for c in mpc}) == 1, name
     lqr = _preset("lqr_ff")[0]
-    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg"}
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model"}
+    assert lqr.prediction_model == "single_track_actuators"
+    assert {c.prediction_model for c in mpc} == {"single_track_relaxation"}
     for name in set(shared) - own:
         assert getattr(lqr, name) == getattr(mpc[0], name), name
     # beyond the paper: improved with N_p 30, N_c 10 and its own tuned scaling, else improved

@@ -61,6 +61,7 @@ from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
 from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
+from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -133,13 +134,38 @@ def _zeta(n_model: int, n_ext: int) -> np.ndarray:
     return S
 
 
+def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> np.ndarray:
+    """The slip observer of ``relaxation_model.SlipObserver`` in the loop: with the memory
+    m(k) = e α̂'(k−1) + (g − e) α(k−1) as two states, α̂'(k) = m(k) + (1 − g) α(k) (written
+    into the α' rows of ``Zs``) and m(k+1) = e m(k) + g (1 − e) α(k), α the kinematic slip
+    of the plant's v_y, r and road-wheel angles; x = T v_x/σ, e = exp(−x), g = (1 − e)/x.
+    Returns the observer's rows of the loop matrix (n, n)."""
+    p = cfg.model_params()
+    vxs = max(vx, p.min_speed_mps)
+    A = np.zeros((n, n))
+    for j, (row, d, arm, sig) in enumerate(((RelaxIdx.ALPHA_F, DF, p.a_m,
+                                             p.relaxation_length_front_m),
+                                            (RelaxIdx.ALPHA_R, DR, -p.b_m,
+                                             p.relaxation_length_rear_m))):
+        kin = np.zeros(n)
+        kin[d], kin[VY], kin[R] = 1.0, -1.0 / vxs, -arm / vxs
+        x = cfg.dt_s * vxs / sig
+        e = math.exp(-x)
+        g = -math.expm1(-x) / x
+        Zs[row] = (1.0 - g) * kin
+        Zs[row, i_obs + j] = 1.0
+        A[i_obs + j, i_obs + j] = e
+        A[i_obs + j] += g * (1.0 - e) * kin
+    return A
+
+
 def model_matrices(cfg: MpcConfig, vx: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(A_k, B_k, d_k) of the controller's prediction model at v_x on a straight path, u = 0."""
     model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
                                   cfg.prediction_discretisation)
     zeta0 = np.zeros(N_STATE)
     zeta0[StateIdx.VX] = vx
-    zeta0 = model.measured_state(zeta0, 0.0, 0.0)
+    zeta0, _ = model.measured_state(zeta0, 0.0, 0.0)
     return model.discretise(zeta0, np.zeros(N_INPUT), cfg.dt_s)
 
 
@@ -188,13 +214,17 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     # extended state: plant, command delay registers (3 per period), steer dead-time
     # registers (2 per period), controller memory u(k-1), u(k-2), ... (3 each)
     n_del, n_dead_s = 3 * delay_periods, 2 * n_dead
-    n = N_PLANT + n_del + n_dead_s + n_mem
-    i_del, i_dead, i_mem = N_PLANT, N_PLANT + n_del, N_PLANT + n_del + n_dead_s
-    # ζ of the controller's prediction model, predicted over its known delay with the
-    # commands it sent (as delay.predict_over_delay); both laws read it
     Ak, Bk, _ = model_matrices(cfg, vx)
     n_model = Ak.shape[0]
+    # the slip observer's memory (2 states) for the relaxation-aware model
+    n_obs = 2 if n_model == N_STATE_RELAX else 0
+    n = N_PLANT + n_del + n_dead_s + n_mem + n_obs
+    i_del, i_dead, i_mem = N_PLANT, N_PLANT + n_del, N_PLANT + n_del + n_dead_s
+    i_obs = i_mem + n_mem
+    # ζ of the controller's prediction model (with the observer's α̂'), predicted over its
+    # known delay with the commands it sent (as delay.predict_over_delay); both laws read it
     Zs = _zeta(n_model, n)
+    obs_A = _observer(cfg, vx, n, i_obs, Zs) if n_obs else None
     ch = np.arange(N_INPUT)
     for regs in (register_schedule(known) if n_known else ()):
         U = np.zeros((N_INPUT, n))
@@ -259,6 +289,8 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     A[i_mem:i_mem + N_INPUT] += C_u
     for j in range(N_INPUT, n_mem, N_INPUT):
         A[i_mem + j:i_mem + j + N_INPUT, i_mem + j - N_INPUT:i_mem + j] = np.eye(N_INPUT)
+    if obs_A is not None:
+        A += obs_A
     A_open = A
     K_f = C_u[0:1]
     A_cl = A_open + Bw @ K_f

@@ -115,7 +115,7 @@ class MpcConfig:
     soft_band_phi_deg: float = param(8.0, "soft bound |φ − φ_ref| ≤ band (1 + ε)", lo=1e-6,
                                      hi=180.0, unit="deg")
     # prediction model, eq. (1)
-    prediction_model: str = param("single_track_actuators", "prediction model behind the "
+    prediction_model: str = param("single_track_relaxation", "prediction model behind the "
                                   "model seam (prediction_model.PREDICTION_MODELS)",
                                   choices=tuple(PREDICTION_MODELS))
     mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
@@ -146,6 +146,12 @@ class MpcConfig:
     steer_rear_time_constant_s: float = param(
         0.02, "rear steering lag τ_r of the single_track_actuators model", lo=1e-4, hi=10.0,
         unit="s")
+    relaxation_length_front_m: float = param(
+        0.2199, "front tyres' lateral relaxation length σ_f at static load, of the "
+        "single_track_relaxation model", lo=1e-3, hi=10.0, unit="m")
+    relaxation_length_rear_m: float = param(
+        0.1995, "rear tyres' lateral relaxation length σ_r at static load, of the "
+        "single_track_relaxation model", lo=1e-3, hi=10.0, unit="m")
     input_delay_periods: int = param(0, "known computation delay compensated by prediction "
                                      "(a command computed at k acts from k + N)", lo=0,
                                      hi=100, unit="periods")
@@ -199,7 +205,14 @@ class MpcConfig:
                 raise ValueError("nc_baseline: must lie in [nc_min, nc_max] with APCHA")
             if self.np_min // 3 < 1:
                 raise ValueError("np_min: ⌊np_min/3⌋ must be >= 1 for the N_c clamp of eq. (15)")
-        if (self.prediction_model == "single_track_actuators"
+        if self.prediction_model == "single_track_relaxation" and \
+                self.prediction_discretisation == "euler":
+            raise ValueError(
+                "prediction_discretisation: the relaxation lag σ/vx is shorter than 2T above "
+                f"vx = {min(self.relaxation_length_front_m, self.relaxation_length_rear_m) / (2 * self.dt_s):.0f} m/s, "
+                "where forward Euler oscillates or diverges; use zoh with "
+                "single_track_relaxation")
+        if (self.prediction_model in ("single_track_actuators", "single_track_relaxation")
                 and self.prediction_discretisation == "euler"):
             tau = min(self.steer_front_time_constant_s, self.steer_rear_time_constant_s)
             if tau < 2.0 * self.dt_s:
@@ -232,7 +245,9 @@ class MpcConfig:
             slip_front=self.slip_ratio_front, slip_rear=self.slip_ratio_rear,
             min_speed_mps=self.min_speed_mps,
             steer_front_time_constant_s=self.steer_front_time_constant_s,
-            steer_rear_time_constant_s=self.steer_rear_time_constant_s)
+            steer_rear_time_constant_s=self.steer_rear_time_constant_s,
+            relaxation_length_front_m=self.relaxation_length_front_m,
+            relaxation_length_rear_m=self.relaxation_length_rear_m)
 
     @property
     def du_max(self) -> np.ndarray:

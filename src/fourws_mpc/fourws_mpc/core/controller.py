@@ -14,7 +14,8 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
 5. **prediction**: state ζ0 = [vy, vx, φ, r, Y, X] in the path frame at the nearest point
    (``prediction_frame = "path"``; "global" uses the map frame as printed in the paper),
    extended by the model's own states (the measured road-wheel angles for
-   ``single_track_actuators``), the reference outputs (φ_ref, Y_ref) at s + vx T i,
+   ``single_track_actuators``; with ``single_track_relaxation`` also the transient slip
+   angles its observer estimates, whose memory is committed in stage 7), the reference outputs (φ_ref, Y_ref) at s + vx T i,
    i = 1..N_p, and the injected prediction model (``prediction_model``) discretised at
    (ζ0, u(k−1)), eq. (4). With known delays (``input_delay_periods``, ``steer_dead_time_s``)
    ζ0 is predicted over the delay N_d with the commands already sent and the reference
@@ -129,6 +130,7 @@ class _Prediction:
     Ak: np.ndarray
     Bk: np.ndarray
     dk: np.ndarray
+    memory: Any = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,15 +161,18 @@ class MpcResult:
 
 
 def initial_state(model: PredictionModel, s: VehicleSample, ref: Reference,
-                  near: NearestPoint, frame: str = "path") -> np.ndarray:
+                  near: NearestPoint, frame: str = "path", memory: Any = None,
+                  dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
     """ζ0 = [vy, vx, φ, r, Y, X] in the prediction frame (the path frame at ``near``, or the
-    map frame for ``global``), extended by the model's own measured states."""
+    map frame for ``global``), extended by the model's own measured and estimated states, and
+    the model's memory for the next step (``PredictionModel.measured_state``; ``memory`` is
+    the previous step's, ``dt_s`` the time since it)."""
     zeta = np.zeros(N_STATE)
     zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.R] = s.vy, s.vx, s.yaw_rate
     X, Y, phi = (ref.to_path_frame(near, s.x, s.y, s.yaw) if frame == "path"
                  else (s.x, s.y, s.yaw))
     zeta[StateIdx.PHI], zeta[StateIdx.Y], zeta[StateIdx.X] = phi, Y, X
-    return model.measured_state(zeta, s.steer_front, s.steer_rear)
+    return model.measured_state(zeta, s.steer_front, s.steer_rear, memory, dt_s)
 
 
 class MpcController:
@@ -213,6 +218,8 @@ class MpcController:
         self.model = (self._injected_model if self._injected_model is not None else
                       make_prediction_model(c.prediction_model, c.model_params(),
                                             c.prediction_discretisation))
+        if old is not None and c.prediction_model != old.prediction_model:
+            self.model_memory = None            # another model's estimate means nothing
         self._delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
         self._n_delay = max(self._delays)
         self._schedule = register_schedule(self._delays)
@@ -280,6 +287,7 @@ class MpcController:
         self.e_s_prev: float | None = None
         self.ref_hint: int | None = None
         self._ref: Reference | None = None
+        self.model_memory: Any = None
 
     def step(self, t_s: float, state: VehicleSample, ref: Reference, mu: float | None = None
              ) -> MpcResult:
@@ -296,7 +304,7 @@ class MpcController:
         hz = self._horizons(err)
         pred = self._prediction(meas, ref, err, hz)
         sol = self._solve(meas, mu, pred, hz, w)
-        return self._result(ref, err, w, hz, sol)
+        return self._result(ref, err, w, hz, sol, pred)
 
     # -- stages ---------------------------------------------------------------------------
     @staticmethod
@@ -346,14 +354,16 @@ class MpcController:
         ζ0; with known delays ζ0 predicted over them (``delay``); the reference outputs from
         the delayed point on."""
         c = self.cfg
-        zeta = initial_state(self.model, s, ref, err.near, c.prediction_frame)
+        zeta, memory = initial_state(self.model, s, ref, err.near, c.prediction_frame,
+                                     self.model_memory, c.dt_s)
         n_d = self._n_delay
         phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, hz.n_p + n_d, s.yaw,
                                      c.prediction_frame)
         Ak, Bk, dk = self.model.discretise(zeta, self.u_prev, c.dt_s)
         if n_d:
             zeta = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
-        return _Prediction(zeta, np.column_stack([phi_ref[n_d:], y_ref[n_d:]]), Ak, Bk, dk)
+        return _Prediction(zeta, np.column_stack([phi_ref[n_d:], y_ref[n_d:]]), Ak, Bk, dk,
+                           memory)
 
     def _solve(self, s: VehicleSample, mu: float | None, pred: _Prediction, hz: _Horizons,
                w: _Weights) -> QpSolution:
@@ -388,7 +398,7 @@ class MpcController:
         return sol
 
     def _result(self, ref: Reference, err: _Errors, w: _Weights, hz: _Horizons,
-                sol: QpSolution) -> MpcResult:
+                sol: QpSolution, pred: _Prediction) -> MpcResult:
         """Stage 7: u(k) (eq. 22) or the fallback; commit the step's history."""
         if sol.ok:
             u = sol.u[0].copy()
@@ -406,6 +416,7 @@ class MpcController:
         self.sent.push(u)
         self.n_p, self.n_c = hz.n_p, hz.n_c
         self.e_s_prev = hz.e_s
+        self.model_memory = pred.memory
         self._ref, self.ref_hint = ref, err.near.index
         return MpcResult(
             delta_front=float(u[InputIdx.DF]), delta_rear=float(u[InputIdx.DR]),

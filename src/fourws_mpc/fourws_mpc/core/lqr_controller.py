@@ -23,6 +23,7 @@ as written (ζ0's Y and φ are e_Y and e_φ).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -67,6 +68,8 @@ class LqrFfController:
     def update_config(self, cfg: MpcConfig) -> None:
         """New constants, the last command and the reference index kept."""
         if cfg != self.cfg:
+            if cfg.prediction_model != self.cfg.prediction_model:
+                self.model_memory = None
             self.cfg = cfg
             self._build(cfg)
             self.sent = self.sent.resized(self._n_delay)
@@ -78,6 +81,7 @@ class LqrFfController:
         self.sent = CommandBuffer(self._n_delay, self.u_prev)
         self.ref_hint: int | None = None
         self._ref: Reference | None = None
+        self.model_memory = None
 
     def adopt_reference(self, ref: Reference) -> None:
         """Use ``ref`` from the next step on, keeping the nearest-point index."""
@@ -91,13 +95,14 @@ class LqrFfController:
         hint = self.ref_hint if ref is self._ref else None
         err = ref.errors(s.x, s.y, s.yaw, hint)
         kappa = err.near.curvature
-        x = self._error_state(s, ref, err)
+        x, memory = self._error_state(s, ref, err)
         d = self.law.steer(x, s.vx, kappa)
         prev = float(self.u_prev[InputIdx.DF])
         d = min(max(d, prev - self._dd_max), prev + self._dd_max)
         d = min(max(d, -self._d_max), self._d_max)
         self.u_prev = np.array([d, 0.0, 0.0])
         self.sent.push(self.u_prev)
+        self.model_memory = memory
         self._ref, self.ref_hint = ref, err.near.index
         return MpcResult(
             delta_front=d, delta_rear=0.0, yaw_moment=0.0, controller=self.cfg.controller,
@@ -107,17 +112,21 @@ class LqrFfController:
             solver_status="lqr", iterations=0, slack=0.0, fallback=False,
             ref_index=err.near.index, ref_speed=err.near.speed)
 
-    def _error_state(self, s: VehicleSample, ref: Reference, err: PathErrors) -> np.ndarray:
-        """x = [e1, ė1, e2, ė2] now, or predicted over the known delay (module docstring)."""
+    def _error_state(self, s: VehicleSample, ref: Reference, err: PathErrors
+                     ) -> tuple[np.ndarray, Any]:
+        """x = [e1, ė1, e2, ė2] now, or predicted over the known delay (module docstring);
+        and the prediction model's memory for the next step."""
         kappa = err.near.curvature
         if not self._n_delay:
             e1, e2 = err.lateral_error, err.heading_error
-            return np.array([e1, s.vy + s.vx * e2, e2, s.yaw_rate - s.vx * kappa])
+            return np.array([e1, s.vy + s.vx * e2, e2, s.yaw_rate - s.vx * kappa]), None
         c = self.cfg
-        zeta = initial_state(self.model, s, ref, err.near, "path")
+        zeta, memory = initial_state(self.model, s, ref, err.near, "path", self.model_memory,
+                                     c.dt_s)
         Ak, Bk, dk = self.model.discretise(zeta, self.u_prev, c.dt_s)
         z = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
         phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, self._n_delay, s.yaw, "path")
         e1 = z[StateIdx.Y] - y_ref[-1]
         e2 = z[StateIdx.PHI] - phi_ref[-1]
-        return np.array([e1, z[StateIdx.VY] + s.vx * e2, e2, z[StateIdx.R] - s.vx * kappa])
+        return (np.array([e1, z[StateIdx.VY] + s.vx * e2, e2, z[StateIdx.R] - s.vx * kappa]),
+                memory)

@@ -71,7 +71,8 @@ class InputIdx(IntEnum):
 @dataclass(frozen=True, slots=True)
 class ModelParams:
     """Parameters of eq. (1) in SI units; C_cf, C_cr, C_lf, C_lr are per tyre; the steering
-    time constants belong to the actuator-aware model (``actuator_model``)."""
+    time constants belong to the actuator-aware model (``actuator_model``), the relaxation
+    lengths to the relaxation-aware one (``relaxation_model``)."""
 
     mass_kg: float = 750.0
     yaw_inertia_kg_m2: float = 750.0
@@ -88,6 +89,10 @@ class ModelParams:
     #: only (``actuator_model``); eq. (1) takes the commanded angles
     steer_front_time_constant_s: float = 0.02
     steer_rear_time_constant_s: float = 0.02
+    #: lateral relaxation lengths σ_f, σ_r (m) at static load, used by the relaxation-aware
+    #: model only (``relaxation_model``); eq. (1)'s tyre forces act at once
+    relaxation_length_front_m: float = 0.2199
+    relaxation_length_rear_m: float = 0.1995
 
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:

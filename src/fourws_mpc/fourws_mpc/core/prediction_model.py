@@ -8,7 +8,8 @@ A prediction model turns an operating point into the affine discrete model of eq
 are chosen by name (:data:`PREDICTION_MODELS`, parameter ``prediction_model``) or injected
 into :class:`~fourws_mpc.core.controller.MpcController` directly. A model's state may extend
 ζ of eq. (1) by states appended after ``StateIdx.X`` (``n_state``; :meth:`measured_state`
-builds it from the measured ζ and the measured road-wheel angles).
+builds it from the measured ζ and the measured road-wheel angles, and estimates what is not
+measured from a memory the caller carries from step to step and commits).
 
 Discretisation of the linearisation ζ̇ ≈ A_t ζ + B_t u + c, c = f(ζ0, u0) − A_t ζ0 − B_t u0
 (parameter ``prediction_discretisation``):
@@ -25,12 +26,12 @@ Discretisation of the linearisation ζ̇ ≈ A_t ζ + B_t u + c, c = f(ζ0, u0) 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from fourws_common.params import choose
-from fourws_mpc.core import actuator_model
+from fourws_mpc.core import actuator_model, relaxation_model
 from fourws_mpc.core.model import N_STATE, ModelParams, affine_euler, affine_zoh, jacobians
 
 __all__ = ["affine_euler", "affine_zoh"]  # the discretisations live in model.py
@@ -47,9 +48,12 @@ class PredictionModel(Protocol):
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of eq. (4) at (ζ, u) for the period ``dt_s``."""
 
-    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
-                       ) -> np.ndarray:
-        """The model's state from ζ of eq. (1) (6,) and the actual road-wheel angles."""
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float,
+                       memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
+        """The model's state from ζ of eq. (1) (6,) and the actual road-wheel angles, and
+        the memory for the next step (``None`` for a model that estimates nothing).
+        ``memory`` is what the previous step returned (``None``: start afresh), ``dt_s``
+        the time since it."""
 
 
 def _discretiser(name: str) -> Callable:
@@ -80,10 +84,10 @@ class SingleTrackModel(_Discretised):
         """(A_k, B_k, d_k) of eq. (4)."""
         return self._disc(*jacobians(zeta, u, self.params), zeta, u, dt_s)
 
-    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
-                       ) -> np.ndarray:
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float,
+                       memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
         """ζ itself: eq. (1) takes the commanded angles."""
-        return zeta
+        return zeta, None
 
 
 class SingleTrackActuatorModel(_Discretised):
@@ -98,10 +102,37 @@ class SingleTrackActuatorModel(_Discretised):
         """(A_k, B_k, d_k) of the extended model, (8, 8), (8, 3), (8,)."""
         return self._disc(*actuator_model.jacobians(zeta, u, self.params), zeta, u, dt_s)
 
-    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float
-                       ) -> np.ndarray:
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float,
+                       memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
         """[ζ; δf,act; δr,act] with the measured road-wheel angles."""
-        return np.concatenate([zeta[:N_STATE], [steer_front, steer_rear]])
+        return np.concatenate([zeta[:N_STATE], [steer_front, steer_rear]]), None
+
+
+class SingleTrackRelaxationModel(_Discretised):
+    """Eq. (1) with the steering lags and the tyres' lateral relaxation
+    (``relaxation_model``): state [ζ; δf,act; δr,act; α'f; α'r], α' estimated by the
+    :class:`~fourws_mpc.core.relaxation_model.SlipObserver` from the measured kinematic slip."""
+
+    name = "single_track_relaxation"
+    n_state = relaxation_model.N_STATE_RELAX
+
+    def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
+        super().__init__(params, discretisation)
+        self.observer = relaxation_model.SlipObserver(params)
+
+    def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A_k, B_k, d_k) of the extended model, (10, 10), (10, 3), (10,)."""
+        return self._disc(*relaxation_model.jacobians(zeta, u, self.params), zeta, u, dt_s)
+
+    def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float,
+                       memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
+        """[ζ; δf,act; δr,act; α̂'f; α̂'r]: the measured road-wheel angles and the
+        observer's estimate (its memory is returned for the next step)."""
+        z = np.concatenate([zeta[:N_STATE], [steer_front, steer_rear], [0.0, 0.0]])
+        alpha, memory = self.observer.estimate(z, memory, dt_s)
+        z[relaxation_model.RelaxIdx.ALPHA_F], z[relaxation_model.RelaxIdx.ALPHA_R] = alpha
+        return z, memory
 
 
 #: model name (parameter ``prediction_model``) -> factory from the model parameters and the
@@ -109,6 +140,7 @@ class SingleTrackActuatorModel(_Discretised):
 PREDICTION_MODELS: dict[str, Callable[..., PredictionModel]] = {
     "single_track": SingleTrackModel,
     "single_track_actuators": SingleTrackActuatorModel,
+    "single_track_relaxation": SingleTrackRelaxationModel,
 }
 
 
