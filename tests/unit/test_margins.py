@@ -189,3 +189,40 @@ def test_gain_margin_is_the_actuator_gain_that_destabilises_the_loop(controller,
     assert m.gain_margin_db is not None and m.gain_margin_db > 0.0
     g = 10.0 ** (m.gain_margin_db / 20.0)
     assert _rho(A_o + 0.97 * g * B @ K) < 1.0 < _rho(A_o + 1.03 * g * B @ K)
+
+
+def test_the_margins_observer_is_the_controllers_slip_observer():
+    """With the relaxation-aware model the loop carries the slip observer's memory (two
+    states after the controller's command buffer): for the same plant state, buffer and
+    observer memory, the loop's controller row gives the controller's own first move."""
+    from fourws_bringup.core.margins import DF, DR, E1, N_PLANT, VY, R, closed_loop
+    from fourws_mpc.core.relaxation_model import ObserverMemory
+
+    vx = 60 / 3.6
+    cfg = load_mpc_config("mpc_4ws", {**ON, "prediction_model": "single_track_relaxation",
+                                      "state_bounds": False})
+    p = cfg.model_params()
+    _, _, _, K_f = closed_loop(cfg, V, vx)
+    sent = np.array([[1e-3, -5e-4, 0.0], [5e-4, 0.0, 0.0], [0.0, 5e-4, 0.0],
+                     [-5e-4, 0.0, 0.0], [2e-3, 0.0, 0.0]])
+    x = np.zeros(K_f.shape[1])
+    x[E1], x[DF], x[DR], x[VY], x[R] = 1e-3, 3e-4, -1e-4, 0.01, 0.005
+    x[N_PLANT:N_PLANT + sent.size] = sent.reshape(-1)
+    # the observer's memory: last estimate and last kinematic slip, as the loop's m(k)
+    memory = ObserverMemory((2e-4, -3e-4), (4e-4, -1e-4))
+    i_obs = N_PLANT + sent.size
+    for j, sig in enumerate((p.relaxation_length_front_m, p.relaxation_length_rear_m)):
+        xx = cfg.dt_s * vx / sig
+        e, g = math.exp(-xx), -math.expm1(-xx) / xx
+        x[i_obs + j] = e * memory.alpha_hat[j] + (g - e) * memory.alpha_kin[j]
+    assert K_f.shape[1] == i_obs + 2
+    ctrl = make_controller(cfg)
+    ctrl.sent.registers[:] = sent
+    ctrl.u_prev = sent[0].copy()
+    ctrl.model_memory = memory
+    path = np.arange(0.0, 200.0, 0.05)
+    z = np.zeros_like(path)
+    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
+    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.01, 0.005, 3e-4, -1e-4), ref)
+    assert not res.fallback
+    assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)

@@ -48,8 +48,10 @@ def _cfg(**kw):
     return MpcConfig(**base)
 
 
-def test_the_state_predicted_over_the_delay_is_the_explicit_simulation_with_the_sent_commands():
-    cfg = _cfg(prediction_model="single_track_actuators", prediction_discretisation="zoh",
+@pytest.mark.parametrize("model", ["single_track_actuators", "single_track_relaxation"])
+def test_the_state_predicted_over_the_delay_is_the_explicit_simulation_with_the_sent_commands(
+        model):
+    cfg = _cfg(prediction_model=model, prediction_discretisation="zoh",
                input_delay_periods=2, steer_dead_time_s=0.03)       # δ: 5 periods, Mz: 2
     ctrl = MpcController(cfg)
     seen = []
@@ -64,6 +66,7 @@ def test_the_state_predicted_over_the_delay_is_the_explicit_simulation_with_the_
     sent = []
     rng = np.random.default_rng(3)
     for k in range(8):
+        memory = ctrl.model_memory                  # the observer's, before step k
         s = VehicleSample(V * DT * k, 0.3 - 0.01 * k, 0.01, V, rng.uniform(-0.1, 0.1),
                           rng.uniform(-0.05, 0.05), rng.uniform(-0.02, 0.02),
                           rng.uniform(-0.01, 0.01))
@@ -73,7 +76,9 @@ def test_the_state_predicted_over_the_delay_is_the_explicit_simulation_with_the_
     # sent at k − N_c + j, Mz held at u(k−1) once its 2 periods are over
     k = 7
     X, Y, phi = ref.to_path_frame(ref.nearest(s.x, s.y), s.x, s.y, s.yaw)
-    z = np.array([s.vy, s.vx, phi, s.yaw_rate, Y, X, s.steer_front, s.steer_rear])
+    z, _ = ctrl.model.measured_state(np.array([s.vy, s.vx, phi, s.yaw_rate, Y, X]),
+                                     s.steer_front, s.steer_rear, memory, DT)
+    assert z.shape == (ctrl.model.n_state,)
     Ak, Bk, dk, got = seen[k]
     delays = (5, 5, 2)
     for j in range(5):

@@ -51,6 +51,11 @@ def test_derived_controller_constants_follow_the_plant():
     c_f, c_r = PARAMS.static_cornering_stiffness()
     assert mpc.cornering_stiffness_front_static_n_per_rad == pytest.approx(c_f, rel=5e-3)
     assert mpc.cornering_stiffness_rear_static_n_per_rad == pytest.approx(c_r, rel=5e-3)
+    # the relaxation-aware prediction's σ: the plant's MF 5.2 σ_α0 at static load
+    fz = PARAMS.static_wheel_loads_n
+    sig_f, sig_r = PARAMS.relaxation_length_m(fz[[0, 2]])
+    assert mpc.relaxation_length_front_m == pytest.approx(sig_f, rel=5e-3)
+    assert mpc.relaxation_length_rear_m == pytest.approx(sig_r, rel=5e-3)
     # the paper's allocation assumes B_f = B_r = B
     assert alloc.track_width_m == PLANT["track_width_front_m"] == PLANT["track_width_rear_m"]
     # the PID's torque range is the four motors together

@@ -207,11 +207,11 @@ class MpcConfig:
                 raise ValueError("np_min: ⌊np_min/3⌋ must be >= 1 for the N_c clamp of eq. (15)")
         if self.prediction_model == "single_track_relaxation" and \
                 self.prediction_discretisation == "euler":
+            sigma = min(self.relaxation_length_front_m, self.relaxation_length_rear_m)
             raise ValueError(
                 "prediction_discretisation: the relaxation lag σ/vx is shorter than 2T above "
-                f"vx = {min(self.relaxation_length_front_m, self.relaxation_length_rear_m) / (2 * self.dt_s):.0f} m/s, "
-                "where forward Euler oscillates or diverges; use zoh with "
-                "single_track_relaxation")
+                f"vx = {sigma / (2 * self.dt_s):.0f} m/s, where forward Euler oscillates or "
+                "diverges; use zoh with single_track_relaxation")
         if (self.prediction_model in ("single_track_actuators", "single_track_relaxation")
                 and self.prediction_discretisation == "euler"):
             tau = min(self.steer_front_time_constant_s, self.steer_rear_time_constant_s)

@@ -15,9 +15,9 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
    (``prediction_frame = "path"``; "global" uses the map frame as printed in the paper),
    extended by the model's own states (the measured road-wheel angles for
    ``single_track_actuators``; with ``single_track_relaxation`` also the transient slip
-   angles its observer estimates, whose memory is committed in stage 7), the reference outputs (φ_ref, Y_ref) at s + vx T i,
-   i = 1..N_p, and the injected prediction model (``prediction_model``) discretised at
-   (ζ0, u(k−1)), eq. (4). With known delays (``input_delay_periods``, ``steer_dead_time_s``)
+   angles its observer estimates, whose memory is committed in stage 7), the reference
+   outputs (φ_ref, Y_ref) at s + vx T i, i = 1..N_p, and the injected prediction model
+   (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4). With known delays (``input_delay_periods``, ``steer_dead_time_s``)
    ζ0 is predicted over the delay N_d with the commands already sent and the reference
    starts N_d periods later (``delay``);
 6. **solve**: the QP of eq. (16)-(20) (``qp``) with the injected solver (``qp_solver``),

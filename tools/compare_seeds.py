@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+"""Paired comparison of controllers over seeds, from a ``fourws sweep`` results.csv.
+
+    python tools/compare_seeds.py runs/lqr-comparison/results.csv --reference lqr_ff
+        [--metric max_abs_lateral_error_m] [--condition all]
+
+For every scenario and every other controller: the median and worst of the metric, and,
+paired by seed against the reference, the median difference, how many seeds the controller
+is better (smaller) on, and the two-sided Wilcoxon signed-rank p (scipy; no normality
+assumed). Markdown on stdout. Only completed runs of seeds both controllers have are paired;
+a seed with a run that did not complete is counted as lost for that controller.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import statistics
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+from scipy.stats import wilcoxon
+
+
+def read_rows(path: Path, metric: str, condition: str | None
+              ) -> dict[tuple[str, str], dict[int, float | None]]:
+    """(scenario, controller) -> seed -> metric (None: the run did not complete)."""
+    out: dict[tuple[str, str], dict[int, float | None]] = defaultdict(dict)
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            if condition is not None and r["condition"] != condition:
+                continue
+            done = r.get("completed", "True") == "True"
+            value = float(r[metric]) if done and r.get(metric) not in (None, "") else None
+            out[(Path(r["scenario"]).stem, r["controller"])][int(r["seed"])] = value
+    return out
+
+
+def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
+            ) -> list[dict]:
+    """One dict per (scenario, controller other than the reference)."""
+    table = []
+    for scenario in sorted({s for s, _ in rows}):
+        ref = rows.get((scenario, reference))
+        if ref is None:
+            continue
+        for (s, c), runs in sorted(rows.items()):
+            if s != scenario or c == reference:
+                continue
+            seeds = sorted(k for k in runs if k in ref and runs[k] is not None
+                           and ref[k] is not None)
+            diff = [runs[k] - ref[k] for k in seeds]
+            done = [v for v in runs.values() if v is not None]
+            ref_done = [v for v in ref.values() if v is not None]
+            p = (float(wilcoxon(diff).pvalue) if len(diff) >= 6 and any(diff) else None)
+            table.append({
+                "scenario": scenario, "controller": c, "reference": reference,
+                "median": statistics.median(done) if done else None,
+                "worst": max(done) if done else None,
+                "ref_median": statistics.median(ref_done) if ref_done else None,
+                "ref_worst": max(ref_done) if ref_done else None,
+                "lost": len(runs) - len(done), "ref_lost": len(ref) - len(ref_done),
+                "pairs": len(seeds), "paired_median_diff": statistics.median(diff) if diff
+                else None, "better": sum(d < 0 for d in diff), "p": p})
+    return table
+
+
+def markdown(table: list[dict], metric: str, scale: float, unit: str) -> str:
+    def f(v):
+        return "—" if v is None else f"{v * scale:.1f}"
+    lines = [f"{metric} in {unit}; paired by seed against the reference (Wilcoxon two-sided)",
+             "", "| scenario | controller | median (worst) | reference median (worst) | "
+             "paired median diff | better on | p |", "|---|---|---|---|---|---|---|"]
+    for r in table:
+        p = "—" if r["p"] is None else f"{r['p']:.3f}"
+        lost = f", {r['lost']} lost" if r["lost"] else ""
+        ref_lost = f", {r['ref_lost']} lost" if r["ref_lost"] else ""
+        lines.append(f"| {r['scenario']} | {r['controller']} | {f(r['median'])} "
+                     f"({f(r['worst'])}){lost} | {r['reference']} {f(r['ref_median'])} "
+                     f"({f(r['ref_worst'])}){ref_lost} | {f(r['paired_median_diff'])} | "
+                     f"{r['better']} of {r['pairs']} | {p} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("csv", type=Path)
+    ap.add_argument("--reference", default="lqr_ff")
+    ap.add_argument("--metric", default="max_abs_lateral_error_m")
+    ap.add_argument("--condition", default=None, help="only this condition (default: all rows)")
+    a = ap.parse_args(argv)
+    if not a.csv.is_file():
+        print(f"compare_seeds: {a.csv}: no such file", file=sys.stderr)
+        return 2
+    rows = read_rows(a.csv, a.metric, a.condition)
+    metres = a.metric.endswith("_m")
+    sys.stdout.write(markdown(compare(rows, a.reference), a.metric, 1000.0 if metres else 1.0,
+                              "mm" if metres else "its unit"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
