@@ -17,9 +17,9 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
    ``single_track_actuators``; with ``single_track_relaxation`` also the transient slip
    angles its observer estimates, whose memory is committed in stage 7), the reference
    outputs (φ_ref, Y_ref) at s + vx T i, i = 1..N_p, and the injected prediction model
-   (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4). With known delays (``input_delay_periods``, ``steer_dead_time_s``)
-   ζ0 is predicted over the delay N_d with the commands already sent and the reference
-   starts N_d periods later (``delay``);
+   (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4). With known delays
+   (``input_delay_periods``, ``steer_dead_time_s``) ζ0 is predicted over the delay N_d with
+   the commands already sent and the reference starts N_d periods later (``delay``);
 6. **solve**: the QP of eq. (16)-(20) (``qp``) with the injected solver (``qp_solver``),
    warm-started from the previous plan shifted by one; hard bounds |vy| ≤ vx tan β_max and
    |r| ≤ factor μ g / vx on predicted steps i ≥ ``state_bounds_from_step``, each relaxed to
