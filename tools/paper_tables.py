@@ -60,7 +60,7 @@ def _cell(m: float, w: float, n: int) -> str:
 
 
 def margin_text(controller: str, scenario: str, world: str) -> str:
-    """ρ / GM / PM at the paper scenario's speed, the world's delays told to the controller
+    """ρ / GM / PM / DM at the paper scenario's speed, the world's delays told to the controller
     (the world's condition, as ``paper.margins_line`` takes it)."""
     from fourws_bringup.core.conditions import node_parameters
     from fourws_bringup.core.configs import load_mpc_config
@@ -72,9 +72,7 @@ def margin_text(controller: str, scenario: str, world: str) -> str:
     m = margins(load_mpc_config(controller, node_parameters(cond)["mpc_node"]), sc.vehicle,
                 sc.speed_mps, delay_periods=cond.delay_periods,
                 steer_dead_time_s=cond.steer_dead_time_s)
-    gm = "∞" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
-    pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
-    return f"{m.spectral_radius:.4f} / {gm} / {pm}"
+    return f"ρ {m.spectral_radius:.4f} / {m.margins_text()}"
 
 
 def ranges_text(rows: list[dict[str, str]], controller: str) -> str:
@@ -100,7 +98,7 @@ def tables(rows: list[dict[str, str]], margins: bool = True) -> str:
             out += [f"### {title} ({world})", "",
                     "| controller | source | " + " | ".join(h.replace("|", "\\|") for h in heads)
                     + " | runs (aborted) | "
-                    + ("ρ / GM / PM | " if margins else "") + "weights and horizons covered |",
+                    + ("margins | " if margins else "") + "weights and horizons covered |",
                     "|---|---|" + "---|" * (len(heads) + 2 + int(margins))]
             medians = {}
             for c in ctrls:

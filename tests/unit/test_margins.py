@@ -98,7 +98,7 @@ WORLDS = {"ideal": [], "realistic": ["--delay-periods", "1", "--steer-dead-time-
 def test_every_shipped_preset_has_a_spectral_radius_of_at_most_0_98(scenario, world, capsys):
     """Issue 18: from ``fourws margins``, every preset (lqr_ff included) at 60 and 90 km/h,
     on the ideal plant and with 1 period of delay and 40 ms of steering dead time that the
-    controller is told of; the phase margin positive."""
+    controller is told of; a phase and a delay margin exist (a gain crossover)."""
     import json
 
     from fourws_bringup.cli import main
@@ -110,6 +110,7 @@ def test_every_shipped_preset_has_a_spectral_radius_of_at_most_0_98(scenario, wo
         out = json.loads(capsys.readouterr().out)
         assert out["spectral_radius"] <= 0.98, (c, out)
         assert out["phase_margin_deg"] is not None and out["phase_margin_deg"] > 0.0, (c, out)
+        assert out["delay_margin_ms"] is not None and out["delay_margin_ms"] > 0.0, (c, out)
 
 
 def test_a_computation_delay_costs_margin():
@@ -119,8 +120,9 @@ def test_a_computation_delay_costs_margin():
     assert b.spectral_radius > a.spectral_radius and b.phase_margin_deg < a.phase_margin_deg
 
 
-ON = {"prediction_model": "single_track_actuators", "prediction_discretisation": "zoh",
-      "input_delay_periods": 1, "steer_dead_time_s": 0.04}
+#: the shipped prediction (the MPC presets' single_track_relaxation, lqr_ff's
+#: single_track_actuators; zoh) told of 1 period + 40 ms
+ON = {"prediction_discretisation": "zoh", "input_delay_periods": 1, "steer_dead_time_s": 0.04}
 
 
 @pytest.mark.parametrize("controller", ["improved", "mpc_4ws", "lqr_ff"])
@@ -145,7 +147,8 @@ def test_the_margins_gain_is_the_controllers_first_move_with_compensation(contro
     from fourws_bringup.core.margins import DF, E1, N_PLANT, closed_loop
 
     vx = 60 / 3.6
-    cfg = load_mpc_config(controller, {**ON, "state_bounds": False})
+    cfg = load_mpc_config(controller, {**ON, "prediction_model": "single_track_actuators",
+                                       "state_bounds": False})   # observer: the next test
     _, _, _, K_f = closed_loop(cfg, V, vx)
     sent = np.array([[1e-3, -5e-4, 0.0], [5e-4, 0.0, 0.0], [0.0, 5e-4, 0.0],
                      [-5e-4, 0.0, 0.0], [2e-3, 0.0, 0.0]])     # u(k−1) .. u(k−5), δr held by
@@ -226,3 +229,26 @@ def test_the_margins_observer_is_the_controllers_slip_observer():
     res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.01, 0.005, 3e-4, -1e-4), ref)
     assert not res.fallback
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
+
+
+@pytest.mark.parametrize("controller", ["lqr_ff", "mpc_fws"])
+def test_the_delay_margin_is_the_dead_time_that_destabilises_the_loop(controller):
+    """Front-steer-only presets at 60 km/h: a steering dead time the controller is not told
+    of, in whole periods below the delay margin, leaves the loop stable; the next whole
+    period above it does not."""
+    cfg = load_mpc_config(controller)
+    m = margins(cfg, V, 60 / 3.6)
+    assert m.delay_margin_ms is not None
+    period_ms = cfg.dt_s * 1e3
+    below = math.floor(m.delay_margin_ms / period_ms) * period_ms
+    above = below + period_ms
+    assert 0.1 < m.delay_margin_ms - below < period_ms - 0.1        # not at a boundary
+    rho = [margins(cfg, V, 60 / 3.6, steer_dead_time_s=d * 1e-3).spectral_radius
+           for d in (below, above)]
+    assert rho[0] < 1.0 < rho[1], (m.delay_margin_ms, rho)
+
+
+def test_an_unstable_loop_has_a_negative_phase_margin_and_no_delay_margin():
+    m = margins(load_mpc_config("mpc_fws", PAPER), V, 60 / 3.6)
+    assert m.spectral_radius > 1.0
+    assert m.phase_margin_deg < 0.0 and m.delay_margin_ms is None

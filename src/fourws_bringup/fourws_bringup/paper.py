@@ -162,10 +162,8 @@ def margins_line(scenario: str, controllers: list[str], world: str = "ideal") ->
         m = margins(load_mpc_config(c, node_parameters(cond)["mpc_node"]), sc.vehicle,
                     sc.speed_mps, delay_periods=cond.delay_periods,
                     steer_dead_time_s=cond.steer_dead_time_s)
-        pm = "n/a" if m.phase_margin_deg is None else f"{m.phase_margin_deg:.1f}°"
-        gm = "∞" if m.gain_margin_db is None else f"{m.gain_margin_db:.1f} dB"
-        parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, GM {gm}, "
-                     f"PM {pm})")
+        parts.append(f"{c} ρ {m.spectral_radius:.4f} ({m.frequency_hz:.1f} Hz, "
+                     f"{m.margins_text()})")
     return (f"Linearised loop at {sc.speed_mps * 3.6:.0f} km/h, {world} (`fourws margins`, "
             f"ρ > 1 grows): " + "; ".join(parts))
 

@@ -42,6 +42,9 @@ states, its memory of the commands it sent, stay closed, as in the car: a gain e
 actuator does not scale what the controller remembers having sent). ``gain_margin_db`` is
 the upper margin: the smallest gain increase that puts L through −1 (> 0 dB). Crossings
 below 0 dB (a gain decrease; the MPC's u = u(k−1) + Δu is an integrator) are not reported.
+``phase_margin_deg`` is the smallest phase lag that destabilises a stable loop, and
+``delay_margin_ms`` the smallest pure delay at the front steer's input that does
+(:func:`_loop_margins`).
 """
 
 from __future__ import annotations
@@ -80,11 +83,21 @@ class Margins:
     gain_margin_db: float | None
     phase_margin_deg: float | None
     speed_mps: float
+    delay_margin_ms: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"spectral_radius": self.spectral_radius, "frequency_hz": self.frequency_hz,
                 "growth_per_s": self.growth_per_s, "gain_margin_db": self.gain_margin_db,
-                "phase_margin_deg": self.phase_margin_deg, "speed_mps": self.speed_mps}
+                "phase_margin_deg": self.phase_margin_deg,
+                "delay_margin_ms": self.delay_margin_ms, "speed_mps": self.speed_mps}
+
+    def margins_text(self) -> str:
+        """"GM x dB / PM y° / DM z ms" ("∞" without a phase crossover above 0 dB, "n/a"
+        without a gain crossover or for an unstable loop): the one way reports print them."""
+        gm = "∞" if self.gain_margin_db is None else f"{self.gain_margin_db:.1f} dB"
+        pm = "n/a" if self.phase_margin_deg is None else f"{self.phase_margin_deg:.1f}°"
+        dm = "n/a" if self.delay_margin_ms is None else f"{self.delay_margin_ms:.1f} ms"
+        return f"GM {gm} / PM {pm} / DM {dm}"
 
 
 def plant_matrices(v: VehicleParams, vx: float, relaxation: bool = True
@@ -301,8 +314,9 @@ def margins(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> Margins:
     """The figures of the module docstring."""
     A_cl, A_o, B_f, K_f = closed_loop(cfg, v, vx, **kw)
     rho, freq = _dominant_pole(A_cl, cfg.dt_s)
-    gm, pm = _loop_margins(A_o, B_f, K_f, cfg.dt_s)
-    return Margins(rho, freq, rho ** (1.0 / cfg.dt_s), gm, pm, vx)
+    gm, pm, dm = _loop_margins(A_o, B_f, K_f, cfg.dt_s, stable=rho < 1.0)
+    return Margins(rho, freq, rho ** (1.0 / cfg.dt_s), gm, pm, vx,
+                   None if dm is None else float(dm) * 1e3)
 
 
 def spectral_radius(cfg: MpcConfig, v: VehicleParams, vx: float, **kw: Any) -> float:
@@ -325,25 +339,44 @@ def _dominant_pole(A_cl: np.ndarray, dt: float) -> tuple[float, float]:
     return float(abs(eig[i])), abs(float(np.angle(eig[i]))) / (2.0 * math.pi * dt)
 
 
-def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float
-                  ) -> tuple[float | None, float | None]:
-    """(upper GM dB, PM deg) of L(z) = −K (zI − A)⁻¹ B in negative feedback (the loop closes
-    with w = K x, i.e. positive feedback of K(zI−A)⁻¹B), on 0.01 rad/s .. Nyquist: over the
-    phase crossovers (L real and negative, at −a) the gain 1/a puts L through −1; the gain
-    margin is the smallest such gain above 1; the phase margin is the smallest over the gain
-    crossovers (|L| = 1). None where there is no such crossover."""
+def _loop_margins(A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float, stable: bool = True
+                  ) -> tuple[float | None, float | None, float | None]:
+    """(upper GM dB, PM deg, delay margin s) of L(z) = −K (zI − A)⁻¹ B in negative feedback
+    (the loop closes with w = K x, i.e. positive feedback of K(zI−A)⁻¹B), on 0.01 rad/s ..
+    Nyquist. Gain: over the phase crossovers (L real and negative, at −a) the gain 1/a puts L
+    through −1; the gain margin is the smallest such gain above 1. Phase: at each gain
+    crossover ω_i (|L| = 1) the phase lag θ_i ∈ [0°, 360°) that puts L on −1,
+    θ_i = (arg L + 180°) mod 360°. For a stable loop (``stable``) the phase margin is the
+    smallest θ_i, the phase lag that destabilises it first (the poles move continuously
+    with the lag, and reach the unit circle exactly where e^{−jθ} L = −1), and the delay
+    margin min_i θ_i/ω_i the pure delay at the plant's input that does. (The open loop is
+    often unstable here, the MPC's u = u(k−1) + Δu with its front-steer path broken, so a
+    lag, not a sign, is what is asked.) For an unstable loop the phase margin is the
+    crossover's (arg L + 180°) wrapped to (−180°, 180°] nearest zero, negative when the
+    loop is past −1, and there is no delay margin. None where there is no such crossover."""
     w = np.logspace(-2, math.log10(math.pi / dt * 0.999), 6000)
     eye = np.eye(A.shape[0])
     L = np.array([-(K @ np.linalg.solve(np.exp(1j * om * dt) * eye - A, B))[0, 0]
                   for om in w])
-    gms, pms = [], []
+    gms, lags = [], []
     for k in range(1, len(w)):
         a, b = L[k - 1], L[k]
         if a.imag * b.imag <= 0.0 and (a.real + b.real) < 0.0:     # crosses the negative axis
             t = a.imag / (a.imag - b.imag) if a.imag != b.imag else 0.0
             gms.append(-20.0 * math.log10(max(abs(a.real + t * (b.real - a.real)), 1e-300)))
         if (abs(a) - 1.0) * (abs(b) - 1.0) <= 0.0 and abs(a) != abs(b):
-            pms.append(math.degrees(math.atan2(b.imag, b.real)) + 180.0)
+            # the crossover, interpolated in log |L|
+            t = math.log(abs(a)) / (math.log(abs(a)) - math.log(abs(b)))
+            om = w[k - 1] + t * (w[k] - w[k - 1])
+            ph = math.degrees(math.atan2(a.imag, a.real))
+            ph += t * ((math.degrees(math.atan2(b.imag, b.real)) - ph + 180.0) % 360.0 - 180.0)
+            lags.append(((ph + 180.0) % 360.0, om))
     upper = min((g for g in gms if g > 0.0), default=None)
-    pm = min(((p + 180.0) % 360.0 - 180.0 for p in pms), key=abs) if pms else None
-    return upper, pm
+    if not lags:
+        return upper, None, None
+    if stable:
+        pm = min(theta for theta, _ in lags)
+        dm = min(math.radians(theta) / om for theta, om in lags)
+        return upper, pm, dm
+    pm = min(((theta + 180.0) % 360.0 - 180.0 for theta, _ in lags), key=abs)
+    return upper, pm, None
