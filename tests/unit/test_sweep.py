@@ -6,7 +6,7 @@ import csv
 import pytest
 
 from fourws_bringup.core.closed_loop import run_closed_loop
-from fourws_bringup.sweep import load_spec, run_sweep, summary_markdown, write_csv
+from fourws_bringup.sweep import load_spec, read_csv, run_sweep, summary_markdown, write_csv
 
 SPEC = """
 controllers: [lqr_ff, no_such_preset]
@@ -60,6 +60,8 @@ def test_csv_and_summary(swept):
     md = summary_markdown(rows, jobs)
     assert "| dlc_60_mu05 | noise | lqr_ff | 2 | 0 |" in md
     assert "| dlc_60_mu05 | ideal | no_such_preset | 1 | 1 |" in md
+    # the summary rebuilt from the CSV (make_benchmark --from-csv) is the same summary
+    assert summary_markdown(read_csv(folder / "results.csv"), jobs) == md
 
 
 def test_bad_spec_names_the_key(tmp_path):

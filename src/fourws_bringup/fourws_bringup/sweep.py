@@ -220,6 +220,25 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
             w.writerow({k: _cell(r.get(k)) for k in keys})
 
 
+def _parse(v: str) -> Any:
+    """A results.csv cell back to what :func:`run_job` wrote: bool, float (empty: nan) or
+    text."""
+    if v in ("True", "False"):
+        return v == "True"
+    if v == "":
+        return math.nan
+    try:
+        return float(v)
+    except ValueError:
+        return v
+
+
+def read_csv(path: Path) -> list[dict[str, Any]]:
+    """The rows of a results.csv written by :func:`write_csv`, in job order."""
+    with open(path, newline="", encoding="utf-8") as f:
+        return [{k: _parse(v) for k, v in r.items()} for r in csv.DictReader(f)]
+
+
 def _cell(v: Any) -> Any:
     if isinstance(v, float) and not math.isfinite(v):
         return ""
@@ -247,10 +266,12 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
         conds[job.condition.name] = job.condition
     lines = ["| scenario | condition | controller | runs | aborted | median max|eY| m | "
              "worst max|eY| m | median yaw-rate RMS, last 10 s, deg/s | median steer-rate "
-             "RMS deg/s | ρ | PM deg |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "RMS deg/s | ρ | PM deg | DM ms |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (sc, cond, c), rs in cells.items():
         e = [r["max_abs_lateral_error_m"] for r in rs
-             if isinstance(r.get("max_abs_lateral_error_m"), float)]
+             if isinstance(r.get("max_abs_lateral_error_m"), float)
+             and math.isfinite(r["max_abs_lateral_error_m"])]
         aborted = sum(1 for r in rs if not r.get("completed"))
         try:
             cnd = conds[cond]
@@ -261,16 +282,17 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
             scn = load_scenario(sc).with_vehicle_overrides(plant.get("vehicle_overrides", ""))
             mg = margins(cfg, scn.vehicle, scn.speed_mps, delay_periods=cnd.delay_periods,
                          steer_dead_time_s=cnd.steer_dead_time_s)
-            rho, pm = f"{mg.spectral_radius:.4f}", (
-                "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f}")
+            rho, pm, dm = f"{mg.spectral_radius:.4f}", (
+                "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f}"), (
+                "n/a" if mg.delay_margin_ms is None else f"{mg.delay_margin_ms:.1f}")
         except Exception as exc:  # noqa: BLE001 - a margin that cannot be computed is shown
-            rho, pm = f"error: {exc}", ""
+            rho, pm, dm = f"error: {exc}", "", ""
         med = f"{float(np.median(e)):.4f}" if e else "—"
         worst = f"{max(e):.4f}" if e else "—"
         act = [_median(rs, k) for k in ("yaw_rate_rms_tail_deg_s", "steer_rate_rms_deg_s")]
         name = Path(sc).stem if sc.endswith((".yaml", ".yml")) else sc
         lines.append(f"| {name} | {cond} | {c} | {len(rs)} | {aborted} | {med} | {worst} | "
-                     f"{act[0]} | {act[1]} | {rho} | {pm} |")
+                     f"{act[0]} | {act[1]} | {rho} | {pm} | {dm} |")
     return "\n".join(lines) + "\n"
 
 
