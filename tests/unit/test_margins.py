@@ -252,3 +252,56 @@ def test_an_unstable_loop_has_a_negative_phase_margin_and_no_delay_margin():
     m = margins(load_mpc_config("mpc_fws", PAPER), V, 60 / 3.6)
     assert m.spectral_radius > 1.0
     assert m.phase_margin_deg < 0.0 and m.delay_margin_ms is None
+
+
+def test_the_yaw_moment_level_penalty_pins_the_free_direction():
+    """Increment-only costs leave a yaw moment held by counter-steer free: a λ = 1 mode of
+    the nominal loop (improved at 60 km/h, every mode counted). A level penalty on M_z moves it
+    inside the unit circle; with the model's cornering stiffness 30 % low the free direction
+    drifts (ρ > 1) without the penalty and not with it."""
+    from fourws_bringup.core.margins import closed_loop
+
+    def rho_all(overrides):
+        A = closed_loop(load_mpc_config("improved", overrides), V, 60 / 3.6)[0]
+        return _rho(A)
+
+    low = {"cornering_stiffness_front_static_n_per_rad": 19595.8,
+           "cornering_stiffness_rear_static_n_per_rad": 20999.3}
+    assert rho_all({"mz_level_weight": 0.0}) == pytest.approx(1.0, abs=1e-4)
+    assert rho_all({"mz_level_weight": 0.0043}) < 0.97
+    assert rho_all({"mz_level_weight": 0.0, **low}) > 1.02
+    assert rho_all({"mz_level_weight": 0.0043, **low}) < 1.0
+
+
+def test_the_margins_gain_includes_the_level_penalty():
+    """improved with the level penalty and a yaw moment remembered in u(k−1): the loop's
+    controller row gives the controller's own first move (its fuzzy weights at 1 mm are the
+    centre rule's to well within the tolerance)."""
+    from fourws_bringup.core.margins import DF, E1, N_PLANT, closed_loop
+
+    vx = 60 / 3.6
+    cfg = load_mpc_config("improved", {"prediction_model": "single_track_actuators",
+                                       "horizons_mode": "fixed", "state_bounds": False,
+                                       "mz_level_weight": 0.05})
+    _, _, _, K_f = closed_loop(cfg, V, vx)
+    u_prev = np.array([1e-3, -5e-4, 400.0])
+    x = np.zeros(K_f.shape[1])
+    x[E1], x[DF] = 1e-3, 3e-4
+    x[N_PLANT:N_PLANT + 3] = u_prev
+    ctrl = make_controller(cfg)
+    ctrl.u_prev = u_prev.copy()
+    ctrl.sent.registers[:] = u_prev
+    path = np.arange(0.0, 200.0, 0.05)
+    z = np.zeros_like(path)
+    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
+    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    assert not res.fallback
+    assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
+    # and the penalty acts: without it the same step keeps more of the yaw moment
+    free = make_controller(load_mpc_config("improved", {
+        "prediction_model": "single_track_actuators", "horizons_mode": "fixed",
+        "state_bounds": False, "mz_level_weight": 0.0}))
+    free.u_prev = u_prev.copy()
+    free.sent.registers[:] = u_prev
+    kept = free.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    assert abs(res.yaw_moment) < abs(kept.yaw_moment)

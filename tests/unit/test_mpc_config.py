@@ -116,3 +116,13 @@ def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
         assert getattr(cfg, key) == pytest.approx(value, rel=0.02), key
     assert cfg.scale_dsteer_front_deg == cfg.max_dsteer_front_deg
     assert cfg.scale_dmz_nm == cfg.max_dyaw_moment_nm
+
+
+def test_the_yaw_moment_level_weight_follows_its_stated_rule():
+    """mpc.yaml: κ = (e^{T/τ} − 1)/N_p with τ = 0.2 s, so that a yaw moment held by
+    counter-steer decays by 1/(1 + κ N_p) = e^{−T/τ} per period (docs/mpc.md)."""
+    import math
+
+    cfg = MpcConfig()
+    rule = (math.exp(cfg.dt_s / 0.2) - 1.0) / cfg.np_baseline
+    assert cfg.mz_level_weight == pytest.approx(rule, rel=0.01)

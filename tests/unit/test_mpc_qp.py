@@ -368,3 +368,28 @@ def test_the_closed_loop_with_daqp_follows_the_osqp_one_within_solver_tolerance(
         np.testing.assert_allclose(runs["daqp"].state[key], runs["osqp"].state[key],
                                    rtol=0, atol=1e-6, err_msg=key)
     assert not np.any(runs["daqp"].mpc["fallback"])
+
+
+def test_the_input_level_cost_is_the_sum_of_the_held_levels_over_the_horizon():
+    """qp.input_level_cost: u(k+i) = u(k−1) + Σ_{j ≤ min(i, Nc−1)} Δu_j for i = 0..Np−1;
+    the quadratic form of (M, w) plus its linear and constant parts equals
+    Σ_i ‖u(k+i)‖²_S computed step by step."""
+    from fourws_mpc.core.qp import input_level_cost
+
+    rng = np.random.default_rng(5)
+    n_p, n_c = 12, 4
+    D = np.tile([0.014, 0.010, 300.0], n_c)
+    s = np.array([0.0, 2.0, 1e-5])
+    M, w = input_level_cost(n_p, n_c, D, s)
+    u_prev = np.array([0.01, -0.004, 250.0])
+    dz = rng.uniform(-1, 1, 3 * n_c)
+    du = (dz * D).reshape(n_c, 3)
+    direct = 0.0
+    u = u_prev.copy()
+    for i in range(n_p):
+        if i < n_c:
+            u = u + du[i]
+        direct += float(u @ (s * u))
+    u_t = np.tile(u_prev, n_c)
+    quad = dz @ M.T @ (w * (M @ dz)) + 2 * u_t @ (w * (M @ dz)) + u_t @ (w * u_t)
+    assert quad == pytest.approx(direct, rel=1e-12)

@@ -56,14 +56,14 @@ from typing import Any
 import numpy as np
 
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.cost_scaling import effective_weights, level_weights
 from fourws_mpc.core.delay import channel_delays, register_schedule
 from fourws_mpc.core.fuzzy_weights import mamdani
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
 from fourws_mpc.core.prediction_model import make_prediction_model
-from fourws_mpc.core.qp import augment, output_matrix, prediction_matrices
+from fourws_mpc.core.qp import augment, input_level_cost, output_matrix, prediction_matrices
 from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
@@ -206,6 +206,14 @@ def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
     W = np.tile(q_eff, n_p)
     H = 2.0 * th.T @ (W[:, None] * th) + 2.0 * np.diag((np.tile(r_eff, n_c) * D * D)[cols])
     G = 2.0 * th.T @ (W[:, None] * psi[rows])                         # gradient = G ξ
+    s_level = level_weights(cfg, r_eff)
+    if np.any(s_level):                       # qp.input_level_cost, u(k−1) the last 3 of ξ
+        M, wl = input_level_cost(n_p, n_c, D, s_level)
+        M = M[:, cols]
+        H += 2.0 * M.T @ (wl[:, None] * M)
+        tile_u = np.zeros((N_INPUT * n_c, psi.shape[1]))
+        tile_u[:, -N_INPUT:] = np.tile(np.eye(N_INPUT), (n_c, 1))
+        G += 2.0 * M.T @ (wl[:, None] * tile_u)
     dz = -np.linalg.solve(H, G)                                       # scaled increments
     full = np.zeros((N_INPUT * n_c, psi.shape[1]))
     full[cols] = dz

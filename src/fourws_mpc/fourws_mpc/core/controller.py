@@ -52,7 +52,7 @@ import numpy as np
 from fourws_common.input_guard import implausible_fields
 from fourws_mpc.core.apcha import apcha, integrated_error
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.cost_scaling import effective_weights, level_weights
 from fourws_mpc.core.delay import (
     CommandBuffer,
     channel_delays,
@@ -381,9 +381,10 @@ class MpcController:
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
+        s_level = level_weights(c, r_eff)
         sol = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev, pred.ref_out,
                             hz.n_p, hz.n_c, q_eff, r_eff, c.rho, bounds,
-                            warm_du_scaled=self._warm(hz.n_c))
+                            warm_du_scaled=self._warm(hz.n_c), s_level=s_level)
         if sol.ok or sol.code is not QpStatus.PRIMAL_INFEASIBLE or not bounds.state_bounds:
             return sol
         # the hard bounds cannot be met from here (the lagging steering still moves the
@@ -391,7 +392,7 @@ class MpcController:
         retry = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev,
                               pred.ref_out, hz.n_p, hz.n_c, q_eff, r_eff, c.rho,
                               dataclasses.replace(bounds, state_bounds=False),
-                              warm_du_scaled=self._warm(hz.n_c))
+                              warm_du_scaled=self._warm(hz.n_c), s_level=s_level)
         if retry.ok:
             retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}"
             return retry

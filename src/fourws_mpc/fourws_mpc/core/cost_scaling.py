@@ -32,6 +32,15 @@ def effective_weights(cfg: MpcConfig, q_phi: float, q_y: float, r_dd: float, r_d
     return q, r
 
 
+def level_weights(cfg: MpcConfig, r_eff: np.ndarray) -> np.ndarray:
+    """s_level (3,) of the input-level penalty (``qp.input_level_cost``): the yaw moment's
+    level weighted ``mz_level_weight`` times its increment weight, both on M_z / s_ΔMz, so
+    s_Mz = mz_level_weight · r_eff[M_z]; the steering levels are not penalised."""
+    s = np.zeros(N_INPUT)
+    s[InputIdx.MZ] = cfg.mz_level_weight * r_eff[InputIdx.MZ]
+    return s
+
+
 def equal_effect_scaling(cfg: MpcConfig, speed_mps: float = 60.0 / 3.6
                          ) -> dict[str, float]:
     """The cost scaling's characteristic sizes derived from the prediction model.

@@ -24,6 +24,15 @@ i = 1 to Nc−1, one increment short; docs/mpc.md, "Deviations from the paper"):
 
     J = Σ_{i=1..Np} ‖y_i − y_ref,i‖²_Q + Σ_{j=0..Nc−1} ‖Δu_j‖²_R + ρ ε²
 
+Beyond the paper, an optional penalty on the input *level* (``input_level_cost``; 0 in the
+paper's cost): S = diag(s_δf, s_δr, s_Mz) on u(k+i) = u(k−1) + Σ_{j≤min(i, Nc−1)} Δu_j over
+i = 0..Np−1 (the plan held after N_c, as the prediction holds it)::
+
+    J += Σ_{i=0..Np−1} ‖u(k+i)‖²_S
+
+It pins an input direction the increment-only cost leaves free (a yaw moment held by
+counter-steer: no motion, no cost; docs/mpc.md, "The yaw moment's free direction").
+
 Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
 by the squares of the characteristic sizes of the cost scaling, see ``cost_scaling.py``). The QP
 variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
@@ -131,6 +140,18 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
     theta = blocks.transpose(0, 2, 1, 3).reshape(no * n_p, nu * n_c)
     gamma = np.cumsum(CP[:n_p], axis=0).reshape(no * n_p, -1)
     return psi, theta, gamma
+
+
+def input_level_cost(n_p: int, n_c: int, D: np.ndarray, s_eff: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(M, w) of the level penalty: u over the planned steps is u(k−1) tiled + M ΔŨ, with
+    M (3Nc, 3Nc) the cumulative sum times D, and w (3Nc,) the level weights per planned step,
+    the last step's counted N_p − N_c + 1 times (held to the horizon's end). The cost adds
+    ΔŨᵀ Mᵀ diag(w) M ΔŨ + 2 u_tᵀ diag(w) M ΔŨ (+ const) for u_t = u(k−1) tiled."""
+    cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(N_INPUT))
+    hold = np.ones(n_c)
+    hold[-1] = n_p - n_c + 1
+    return cum * D[None, :], np.kron(hold, s_eff)
 
 
 @dataclass(frozen=True)
@@ -268,6 +289,7 @@ class MpcQp:
         q_eff: np.ndarray, r_eff: np.ndarray, rho: float,
         bounds: QpBounds,
         warm_du_scaled: np.ndarray | None = None,
+        s_level: np.ndarray | None = None,
     ) -> QpSolution:
         """Solve one MPC step.
 
@@ -275,7 +297,8 @@ class MpcQp:
         with appended states); zeta0 (n,), u_prev (3,) = u(k−1);
         ref (Np, 2): [φ_ref, Y_ref] at i = 1..Np; q_eff (2,) = [q_φ, q_Y] and r_eff (3,) the
         effective weights of the scaled cost; rho the slack weight; warm_du_scaled (Nc, 3)
-        optional primal warm start in units of Δu_max.
+        optional primal warm start in units of Δu_max; s_level (3,) the effective weights of
+        the input-level penalty (``input_level_cost``; None or zeros: the paper's cost).
         """
         nu = N_INPUT
         inst = self.instance(n_p, n_c)
@@ -296,7 +319,13 @@ class MpcQp:
         r_s = np.repeat(r_eff[None, :], n_c, axis=0).reshape(-1) * D * D
         H = 2.0 * (th_out.T @ (w[:, None] * th_out))
         H[inst.diag] += 2.0 * r_s
-        qvec = np.concatenate([2.0 * th_out.T @ (w * e_free), [0.0]])
+        u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
+        g = 2.0 * th_out.T @ (w * e_free)
+        if s_level is not None and np.any(s_level):
+            M, wl = input_level_cost(n_p, n_c, D, s_level)
+            H += 2.0 * (M.T @ (wl[:, None] * M))
+            g += 2.0 * M.T @ (wl * u_prev_t)
+        qvec = np.concatenate([g, [0.0]])
 
         A = inst.A
         ncol = inst.ncol
@@ -307,7 +336,6 @@ class MpcQp:
         A[inst.r_soft_lo, :ncol] = th_out
         A[inst.r_soft_lo, ncol] = band
 
-        u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
         hard_free = free[:, 2:].reshape(-1)
         if bounds.state_bounds:
             hard_lim = inst.hard_lim
