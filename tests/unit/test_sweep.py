@@ -118,7 +118,11 @@ def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
     assert len(jobs) == 140 and len({j.key for j in jobs}) == 140
     by = {j.condition.name: j.condition for j in jobs}
     assert by["relaxation_x0"].vehicle_overrides == {"tyre_relaxation_peak_over_radius": 0}
-    assert by["scaling_k1"].mpc_overrides == {"scale_y_m": 0.0059, "scale_phi_deg": 0.075}
+    from fourws_bringup.core.configs import load_mpc_config
+
+    shipped = load_mpc_config("improved")
+    assert by["scaling_k1"].mpc_overrides == {"scale_y_m": shipped.scale_y_m,
+                                              "scale_phi_deg": shipped.scale_phi_deg}
     # k = 1 is the shipped scaling: the same run as no override
     a = run("dlc_60_mu05", "improved", 150, condition=by["scaling_k1"])
     b = run("dlc_60_mu05", "improved", 150)

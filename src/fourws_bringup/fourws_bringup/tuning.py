@@ -172,6 +172,14 @@ def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> list[Any
     return jobs
 
 
+def shipped(group: Group) -> dict[str, float]:
+    """The values the group's first preset holds now (what the last run chose)."""
+    from .core.configs import load_mpc_config
+
+    cfg = load_mpc_config(group.controllers[0])
+    return {p: float(getattr(cfg, p)) for p in group.parameters}
+
+
 def _score(row: Mapping[str, Any]) -> float:
     return float(row["max_abs_lateral_error_m"]) if row.get("completed") else math.inf
 
@@ -180,11 +188,14 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
     """(chosen values per group, one report row per kept candidate): steps 1-4.
 
-    Step 3 is evaluated with exact pruning: the kept candidates are run in grid order, a
-    batch of ``workers`` runs at a time, and a candidate is abandoned as soon as one of its
-    runs is worse than the best complete candidate's score (its own score, a maximum, can
-    then only be worse). The choice is the one a full evaluation makes; the report gives
-    a pruned candidate's lower bound."""
+    Step 3 is evaluated with exact pruning: the kept candidates are run a batch of
+    ``workers`` runs at a time, and a candidate is abandoned as soon as one of its runs is
+    worse than the best complete candidate's score (its own score, a maximum, can then only
+    be worse). The candidate the presets hold now (:func:`shipped`) runs first, the others in
+    grid order: a good first bar prunes the rest sooner, and since pruning is strict and the
+    choice compares (score, ρ, grid index), the order changes the time, never the choice,
+    which is the one a full evaluation makes. The report, in grid order, gives a pruned
+    candidate's lower bound."""
     from concurrent.futures import Executor, ProcessPoolExecutor
 
     from .sweep import run_job
@@ -210,7 +221,11 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
                                  f"spectral radius <= {spec.max_spectral_radius}; widen "
                                  "grid_exponents")
             best: tuple[float, float, int] | None = None
-            for k, (c, r) in enumerate(kept):
+            now = shipped(group)
+            order = sorted(range(len(kept)), key=lambda k: kept[k][0] != now)
+            rows: dict[int, dict[str, Any]] = {}
+            for k in order:
+                c, r = kept[k]
                 jobs = _jobs(spec, group, c)
                 by_ctrl: dict[str, float] = {}
                 done = 0
@@ -223,10 +238,10 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
                         break
                 score = max(by_ctrl.values())
                 complete = done == len(jobs)
-                report.append({"group": group.name, **c, "worst_rho": round(r, 5),
-                               "runs": done, "score_m": score if complete else None,
-                               "pruned_above_m": None if complete else score,
-                               **{f"max_ey_{n}": v for n, v in by_ctrl.items()}})
+                rows[k] = {"group": group.name, **c, "worst_rho": round(r, 5),
+                           "runs": done, "score_m": score if complete else None,
+                           "pruned_above_m": None if complete else score,
+                           **{f"max_ey_{n}": v for n, v in by_ctrl.items()}}
                 if progress:
                     print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
                           + (f"score {score:.4f} m" if complete else
@@ -234,6 +249,7 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
                           file=sys.stderr)
                 if complete and (best is None or (score, r, k) < best):
                     best = (score, r, k)
+            report += [rows[k] for k in sorted(rows)]
             chosen[group.name] = kept[best[2]][0]
     return chosen, report
 
