@@ -360,13 +360,20 @@ def test_the_data_check_finds_every_bad_entry(bad):
 
 
 def test_the_closed_loop_with_daqp_follows_the_osqp_one_within_solver_tolerance():
+    """The exact DAQP solution and OSQP's (ε_rel = 1e-4) drive the same closed loop: every
+    state trace agrees to 1e-4 of its own peak (OSQP's relative tolerance carried through
+    the loop), and to 1 µm in position. (An absolute 1e-6 on every trace held until the
+    yaw-moment level penalty: the yaw rate then differed by 1.1e-6 rad/s of 0.068.)"""
     from fourws_bringup.core.closed_loop import run_closed_loop
 
     runs = {s: run_closed_loop("dlc_60_mu05", "improved", max_steps=400,
                                mpc_overrides={"qp_solver": s}) for s in ("osqp", "daqp")}
     for key in ("y", "yaw", "yaw_rate"):
-        np.testing.assert_allclose(runs["daqp"].state[key], runs["osqp"].state[key],
-                                   rtol=0, atol=1e-6, err_msg=key)
+        ref = runs["osqp"].state[key]
+        np.testing.assert_allclose(runs["daqp"].state[key], ref, rtol=0,
+                                   atol=1e-4 * float(np.abs(ref).max()), err_msg=key)
+    np.testing.assert_allclose(runs["daqp"].state["y"], runs["osqp"].state["y"], rtol=0,
+                               atol=1e-6)
     assert not np.any(runs["daqp"].mpc["fallback"])
 
 
