@@ -64,7 +64,7 @@ from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
 from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.qp import augment, input_level_cost, output_matrix, prediction_matrices
-from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx
+from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, hold_coefficients
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -162,9 +162,7 @@ def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> 
                                              p.relaxation_length_rear_m))):
         kin = np.zeros(n)
         kin[d], kin[VY], kin[R] = 1.0, -1.0 / vxs, -arm / vxs
-        x = cfg.dt_s * vxs / sig
-        e = math.exp(-x)
-        g = -math.expm1(-x) / x
+        e, g = hold_coefficients(cfg.dt_s, vxs, sig)
         Zs[row] = (1.0 - g) * kin
         Zs[row, i_obs + j] = 1.0
         A[i_obs + j, i_obs + j] = e

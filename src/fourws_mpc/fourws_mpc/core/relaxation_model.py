@@ -142,6 +142,14 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
     return f, A, B
 
 
+def hold_coefficients(dt_s: float, vx: float, sigma_m: float) -> tuple[float, float]:
+    """(e, g) of :class:`SlipObserver`'s first-order hold: x = T vx/σ, e = exp(−x),
+    g = (1 − e)/x (accurate for small x), so α̂'(k) = e α̂'(k−1) + (1 − g) α(k) + (g − e) α(k−1)
+    (the one statement; ``core.margins`` builds the observer's loop states from it)."""
+    x = dt_s * vx / sigma_m
+    return math.exp(-x), -math.expm1(-x) / x
+
+
 @dataclass(frozen=True, slots=True)
 class ObserverMemory:
     """What :class:`SlipObserver` carries from one step to the next: the estimate α̂' and
@@ -181,9 +189,7 @@ class SlipObserver:
         for hat, prev, now, sig in zip(memory.alpha_hat, memory.alpha_kin, alpha,
                                        (p.relaxation_length_front_m,
                                         p.relaxation_length_rear_m), strict=True):
-            x = dt_s * vxs / sig
-            e = math.exp(-x)
-            g = -math.expm1(-x) / x                # (1 − e)/x, accurate for small x
+            e, g = hold_coefficients(dt_s, vxs, sig)
             out.append(e * hat + (1.0 - g) * now + (g - e) * prev)
         est = (out[0], out[1])
         return est, ObserverMemory(est, alpha)
