@@ -195,3 +195,23 @@ def test_a_normal_end_before_the_graph_saw_it_or_between_polls_is_no_death(graph
         dead.check()
     assert info.value.returncode == 3 and info.value.last_error == "[ERROR] [x]: bad wheel"
     assert "3 (ABORTED)" in str(info.value)
+
+
+def test_a_later_stop_stage_takes_every_sample_the_earlier_stage_sent(graph, ros, tmp_path):
+    """The recorder's contract at the end of a run: the supervisor stops the writers first
+    (stage 0) and each waits for its reliable samples to be acknowledged before it goes
+    (``node_main.wait_for_acks``), so the reader of stage 1, stopped after them, has the
+    writer's last sample, whatever the loopback lost on the way."""
+    sent, taken = tmp_path / "sent.txt", tmp_path / "taken.txt"
+    sup = graph([NodeSpec(**script_node("talker.py", "talker"),
+                          parameters={"out_file": str(sent)}),
+                 NodeSpec(**script_node("tally.py", "tally"), parameters={"out_file": str(taken)},
+                          stop_stage=1)])
+    got: list[MpcCommand] = []
+    ros.node.create_subscription(MpcCommand, "chatter_cmd", got.append, 10)
+    assert ros.spin_until(lambda: len(got) >= 10, 30.0), "the talker never talked"
+    codes = sup.stop()
+    assert codes == {"talker": 0, "tally": 0}
+    last_sent = int(sent.read_text())
+    assert last_sent >= 10
+    assert taken.read_text().strip() == str(last_sent)

@@ -225,7 +225,8 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
                                           "topics": recorded_topics(condition,
                                                                     via_adapter)},
                               nice=RECORDER_NICE, namespace=namespace,
-                              remappings=clock_remap(namespace)))
+                              remappings=clock_remap(namespace),
+                              stop_stage=1))  # it outlives the writers it records
     return specs
 
 

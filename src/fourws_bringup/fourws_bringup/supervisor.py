@@ -14,7 +14,10 @@ remappings. All nodes of a graph share one ``ROS_DOMAIN_ID`` with discovery kept
   died (the plant at the end of a scenario: completed, aborted or timed out); it is no longer
   waited for in the graph, and :meth:`Supervisor.ended` lists it.
 - :meth:`Supervisor.stop` sends SIGINT, then SIGTERM and SIGKILL after timeouts, to every
-  process group. Children also get ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
+  process group, in stages: a spec's ``stop_stage`` orders them (the recorder stops after
+  the nodes it records, so every reliable sample they sent can still be re-sent to it and
+  acknowledged while they exit; see ``fourws_common.node_main``). Children also get
+  ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
 """
 
 from __future__ import annotations
@@ -103,6 +106,9 @@ class NodeSpec:
     # ROS namespace of the process's nodes ("" or "/": the root); their relative topics move
     # with it (``-r __ns:=/car1``)
     namespace: str = ""
+    # Order of stopping: every process of a lower stage has exited before this one gets
+    # SIGINT (a recorder is 1: it outlives the writers it records).
+    stop_stage: int = 0
 
     def __post_init__(self) -> None:
         if not 0 <= self.nice <= 19:
@@ -387,10 +393,23 @@ class Supervisor:
         return self.procs[name].popen.wait(timeout=timeout_s)
 
     def stop(self, sigint_timeout_s: float = 5.0, sigterm_timeout_s: float = 3.0) -> dict[str, int]:
-        """Stop every node: SIGINT, then SIGTERM, then SIGKILL. Returns the exit codes."""
+        """Stop every node, stage by stage (``NodeSpec.stop_stage``, lowest first): SIGINT,
+        then SIGTERM, then SIGKILL. Returns the exit codes."""
+        for stage in sorted({p.spec.stop_stage for p in self.procs.values()}):
+            self._stop_group([p for p in self.procs.values() if p.spec.stop_stage == stage],
+                             sigint_timeout_s, sigterm_timeout_s)
+        # Reap stragglers left in a node's process group (e.g. grandchildren).
+        for p in self.procs.values():
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(p.popen.pid, signal.SIGKILL)
+        self._close_probe()
+        return {n: p.popen.returncode for n, p in self.procs.items()}
+
+    @staticmethod
+    def _stop_group(procs: list, sigint_timeout_s: float, sigterm_timeout_s: float) -> None:
         for sig, timeout in ((signal.SIGINT, sigint_timeout_s),
                              (signal.SIGTERM, sigterm_timeout_s), (signal.SIGKILL, 5.0)):
-            alive = [p for p in self.procs.values() if p.popen.poll() is None]
+            alive = [p for p in procs if p.popen.poll() is None]
             if not alive:
                 break
             for p in alive:
@@ -400,12 +419,6 @@ class Supervisor:
             for p in alive:
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     p.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
-        # Reap stragglers left in a node's process group (e.g. grandchildren).
-        for p in self.procs.values():
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(p.popen.pid, signal.SIGKILL)
-        self._close_probe()
-        return {n: p.popen.returncode for n, p in self.procs.items()}
 
     def _close_probe(self) -> None:
         if self._probe is not None:

@@ -6,6 +6,12 @@ shut the context down at once, under a running callback: a timer that logged the
 "publisher's context is invalid", which the executor reported as FATAL.) A node may install
 its own handlers in its constructor (the recorder drains first).
 
+Before a node is destroyed, each of its reliable publishers gets up to
+``STOP_ACK_TIMEOUT_S`` (in all) for its samples to be acknowledged by every matched reader.
+A sample lost on the loopback is re-sent by its writer after a heartbeat; a writer destroyed
+at once loses it for good (a recorder stopped with the rest lost the last MPC commands of a
+run). The supervisor stops a recorder after the writers it records (``NodeSpec.stop_stage``).
+
 Executor: rclpy's ``EventsExecutor`` (``rclpy.experimental``, in Jazzy) by default. At 100 Hz
 lockstep with ~15 message deliveries per step over six Python processes on two cores, the
 ``SingleThreadedExecutor`` spends much of its CPU rebuilding its wait set on every
@@ -23,10 +29,12 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
@@ -46,6 +54,8 @@ EXECUTORS: dict[str, Callable[[], Executor]] = {
 PROFILE_ENV = "FOURWS_PROFILE"
 #: Wall period (s, steady clock) at which ``run_nodes`` checks whether a node has set ``done``.
 DONE_POLL_PERIOD_S = 0.02
+#: Longest wait (s, in all) at shutdown for a node's reliable samples to be acknowledged.
+STOP_ACK_TIMEOUT_S = 2.0
 
 
 def make_executor(name: str | None = None) -> Executor:
@@ -129,10 +139,34 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         for node in nodes:
             code = code or getattr(node, "exit_code", 0) or 0
         _stop_profiler(profiler, [n.get_name() for n in nodes])
+        wait_for_acks(nodes, STOP_ACK_TIMEOUT_S)
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def wait_for_acks(nodes: Sequence[Node], timeout_s: float) -> bool:
+    """Wait up to ``timeout_s`` (in all) until every reliable publisher of ``nodes`` has its
+    samples acknowledged by every matched reader; say on stderr which did not. True if all did.
+
+    A reader that leaves the graph is unmatched and no longer waited for; best-effort
+    publishers return at once (``Publisher.wait_for_all_acked``).
+    """
+    deadline = time.monotonic() + timeout_s
+    late: list[str] = []
+    for node in nodes:
+        for pub in list(node.publishers):
+            left = max(0.0, deadline - time.monotonic())
+            try:
+                if not pub.wait_for_all_acked(Duration(seconds=left)):
+                    late.append(pub.topic_name)
+            except Exception:  # noqa: BLE001 - the context is already shut down: nothing to wait
+                return False
+    if late:
+        print(f"[warn] samples on {', '.join(late)} not acknowledged by every reader within "
+              f"{timeout_s:.1f} s of the stop", file=sys.stderr, flush=True)
+    return not late
 
 
 def _start_profiler():
