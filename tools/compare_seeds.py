@@ -6,8 +6,10 @@
 
 For every scenario and every other controller: the median and worst of the metric, and,
 paired by seed against the reference, the median difference, how many seeds the controller
-is better (smaller) on, and the two-sided Wilcoxon signed-rank p (scipy; no normality
-assumed). Markdown on stdout. Only completed runs of seeds both controllers have are paired;
+is better (smaller) on, the two-sided Wilcoxon signed-rank p (scipy; no normality
+assumed) and the mean paired difference with its 95 % confidence interval (Student t: how
+much better or worse the data allow, not only whether they differ). Markdown on stdout. Only
+completed runs of seeds both controllers have are paired;
 a seed with a run that did not complete is counted as lost for that controller.
 """
 
@@ -20,7 +22,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from scipy.stats import wilcoxon
+from scipy.stats import ttest_1samp, wilcoxon
 
 
 def read_rows(path: Path, metric: str, condition: str | None
@@ -54,6 +56,8 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
             done = [v for v in runs.values() if v is not None]
             ref_done = [v for v in ref.values() if v is not None]
             p = (float(wilcoxon(diff).pvalue) if len(diff) >= 6 and any(diff) else None)
+            ci = (tuple(float(v) for v in ttest_1samp(diff, 0.0).confidence_interval(0.95))
+                  if len(diff) >= 3 and statistics.pstdev(diff) > 0.0 else None)
             table.append({
                 "scenario": scenario, "controller": c, "reference": reference,
                 "median": statistics.median(done) if done else None,
@@ -62,7 +66,8 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
                 "ref_worst": max(ref_done) if ref_done else None,
                 "lost": len(runs) - len(done), "ref_lost": len(ref) - len(ref_done),
                 "pairs": len(seeds), "paired_median_diff": statistics.median(diff) if diff
-                else None, "better": sum(d < 0 for d in diff), "p": p})
+                else None, "better": sum(d < 0 for d in diff), "p": p,
+                "mean_diff": statistics.fmean(diff) if diff else None, "mean_diff_ci95": ci})
     return table
 
 
@@ -71,15 +76,18 @@ def markdown(table: list[dict], metric: str, scale: float, unit: str) -> str:
         return "—" if v is None else f"{v * scale:.1f}"
     lines = [f"{metric} in {unit}; paired by seed against the reference (Wilcoxon two-sided)",
              "", "| scenario | controller | median (worst) | reference median (worst) | "
-             "paired median diff | better on | p |", "|---|---|---|---|---|---|---|"]
+             "paired median diff | better on | p | mean diff [95 % CI] |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in table:
         p = "—" if r["p"] is None else f"{r['p']:.3f}"
         lost = f", {r['lost']} lost" if r["lost"] else ""
         ref_lost = f", {r['ref_lost']} lost" if r["ref_lost"] else ""
+        ci = r["mean_diff_ci95"]
+        mean = f(r["mean_diff"]) + ("" if ci is None else f" [{f(ci[0])}, {f(ci[1])}]")
         lines.append(f"| {r['scenario']} | {r['controller']} | {f(r['median'])} "
                      f"({f(r['worst'])}){lost} | {r['reference']} {f(r['ref_median'])} "
                      f"({f(r['ref_worst'])}){ref_lost} | {f(r['paired_median_diff'])} | "
-                     f"{r['better']} of {r['pairs']} | {p} |")
+                     f"{r['better']} of {r['pairs']} | {p} | {mean} |")
     return "\n".join(lines) + "\n"
 
 

@@ -39,6 +39,8 @@ def test_a_controller_better_on_every_seed_is_significant_and_counted(tmp_path):
     assert r["better"] == 10 and r["pairs"] == 10 and r["lost"] == 0
     assert r["paired_median_diff"] == pytest.approx(-0.0049, abs=2e-4)
     assert r["p"] < 0.01
+    lo, hi = r["mean_diff_ci95"]          # the interval holds the shift and excludes no change
+    assert lo < r["mean_diff"] < hi < 0.0 and lo < -0.0049 < hi
     assert "10 of 10" in cs.markdown(table, "max_abs_lateral_error_m", 1000.0, "mm")
 
 
@@ -51,3 +53,5 @@ def test_a_tie_is_not_significant_and_a_lost_run_is_counted_not_paired(tmp_path)
     (r,) = cs.compare(cs.read_rows(_write(tmp_path, vals), "max_abs_lateral_error_m", None),
                       "ref")
     assert r["lost"] == 1 and r["pairs"] == 9 and r["p"] > 0.5
+    lo, hi = r["mean_diff_ci95"]
+    assert lo < 0.0 < hi                  # a tie: the interval holds zero
