@@ -1,0 +1,60 @@
+"""tools/noise_floor.py: a run's max |eY| against the localisation error of its seed."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from fourws_sim.core.sensing import NoiseSpec, Sensors
+
+ROOT = Path(__file__).resolve().parents[2]
+spec = importlib.util.spec_from_file_location("noise_floor", ROOT / "tools" / "noise_floor.py")
+nf = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(nf)
+
+NOISE = {"x": NoiseSpec(0.02, 1.0), "y": NoiseSpec(0.02, 1.0), "yaw_rate": NoiseSpec(0.002)}
+
+
+@dataclasses.dataclass
+class _Out:  # the measured channels of a plant output, at rest on the x axis
+    x: float = 0.0
+    y: float = 0.0
+    yaw_rate: float = 0.0
+    vx: float = 1.0
+    vy: float = 0.0
+    sideslip: float = 0.0
+
+
+def test_the_floor_is_the_error_the_plant_gave_the_controllers():
+    """The same stream as the bench's Sensors for that seed: a state at y = 0 measured by the
+    plant's sensors shows exactly the errors the floor is the largest of."""
+    sensors = Sensors(NOISE, 0.01, seed=7)
+    seen = [abs(sensors.measure(_Out()).y) for _ in range(500)]
+    assert nf.floor_m(NOISE, 7, 500, 0.01) == pytest.approx(max(seen), abs=0.0)
+    assert nf.floor_m(NOISE, 8, 500, 0.01) != max(seen)           # another seed, another draw
+    assert nf.floor_m({"x": NoiseSpec(0.02)}, 7, 500, 0.01) == 0.0  # no noise on y: no floor
+
+
+def test_a_run_on_the_floor_has_ratio_and_correlation_one(tmp_path):
+    path = tmp_path / "results.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, ["controller", "scenario", "condition", "seed", "completed",
+                               "max_abs_lateral_error_m", "steps"])
+        w.writeheader()
+        for seed in range(6):
+            floor = nf.floor_m(NOISE, seed, 300, 0.01)
+            w.writerow({"controller": "holds", "scenario": "s.yaml", "condition": "all",
+                        "seed": seed, "completed": "True", "steps": 300,
+                        "max_abs_lateral_error_m": floor})
+            w.writerow({"controller": "own", "scenario": "s.yaml", "condition": "all",
+                        "seed": seed, "completed": "True", "steps": 300,
+                        "max_abs_lateral_error_m": 0.05 + 0.001 * (seed % 2)})
+    holds, own = nf.analyse(path, NOISE, 0.01, "y", "all")
+    assert holds["controller"] == "holds" and holds["ratio"] == pytest.approx(1.0)
+    assert holds["corr"] == pytest.approx(1.0)
+    assert abs(own["corr"]) < 0.9
+    assert "| s | holds | 6 |" in nf.markdown([holds, own], "y")
