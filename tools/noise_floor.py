@@ -84,6 +84,21 @@ def markdown(table: list[dict], channel: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def spec_section(path: Path, spec: Path, dt_s: float = 0.01, channel: str = "y") -> str:
+    """Markdown: one table per condition of sweep ``spec`` with noise on ``channel`` (the
+    localisation floor section of docs/benchmark.md)."""
+    with open(path, newline="") as f:
+        names = sorted({r["condition"] for r in csv.DictReader(f)})
+    parts = []
+    for name in names:
+        noise = load_condition(f"{spec}#{name}").noise
+        if channel not in noise:
+            continue
+        parts.append(f"### {name}\n\n" + markdown(analyse(path, noise, dt_s, channel, name),
+                                                  channel))
+    return "\n".join(parts)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("csv", type=Path)

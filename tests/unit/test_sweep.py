@@ -104,8 +104,8 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
     for j in jobs:
         __import__("fourws_sim.core.scenario", fromlist=["load_scenario"]).load_scenario(
             j.scenario)
-    extra = load_spec(spec.parent / "lqr_comparison.yaml")       # the 20-seed comparison
-    assert {j.condition.seed for j in extra} == set(range(20))
+    extra = load_spec(spec.parent / "lqr_comparison.yaml")       # the 60-seed comparison
+    assert {j.condition.seed for j in extra} == set(range(60))
 
 
 def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
