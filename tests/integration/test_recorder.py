@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import script_node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
@@ -297,3 +298,24 @@ def test_a_lockstep_bag_has_simulated_log_times_and_send_times_as_publish_times(
     # step latencies on the wall times (on the simulated log times every step is 10 ms)
     wall_step_ms = np.diff(run.state["wall_ns"]) * 1e-6
     assert m["step_latency_ms"]["step"]["p50"] == pytest.approx(float(np.median(wall_step_ms)))
+
+
+def test_a_recorder_stopped_with_its_writers_keeps_every_sample_they_sent(graph, ros, tmp_path):
+    """``ros2 launch`` signals every process at once: the writer waits for its samples to be
+    acknowledged before it leaves (node_main), and the recorder drains until no writer is left
+    on a per-step topic, so the bag ends with the writer's last sample."""
+    from rosbags.highlevel import AnyReader
+
+    out, sent = tmp_path / "bag", tmp_path / "sent.txt"
+    sup = graph([NodeSpec(**script_node("talker.py", "talker"),
+                          parameters={"out_file": str(sent)}),
+                 recorder(out, topics=["/chatter_cmd:fourws_msgs/msg/MpcCommand"])])
+    got: list[MpcCommand] = []
+    ros.node.create_subscription(MpcCommand, "/chatter_cmd", got.append, 10)
+    assert ros.spin_until(lambda: len(got) >= 10, 30.0), "the talker never talked"
+    codes = sup.stop()                                   # one stage: both get SIGINT at once
+    assert codes == {"talker": 0, "recorder_node": 0}, sup.procs["recorder_node"].last_lines()
+    assert not any("stopped draining" in line for line in sup.procs["recorder_node"].last_lines())
+    with AnyReader([out]) as r:
+        counts = [int(r.deserialize(raw, c.msgtype).delta_front) for c, _t, raw in r.messages()]
+    assert counts and max(counts) == int(sent.read_text())

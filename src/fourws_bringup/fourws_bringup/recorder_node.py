@@ -39,9 +39,13 @@ that is larger. DDS's count alone under-reports: samples a full keep-last queue 
 not raise the event (a run missing 1965 messages was reported as 1 lost).
 
 Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
-arrived for ``drain_quiet_s`` (at most ``drain_max_s``), then ends, and ``destroy_node``
+arrived for ``drain_quiet_s`` *and* no writer is left matched on a per-step topic (at most
+``drain_max_s``), then ends, and ``destroy_node``
 finalises the file (last chunk, summary, footer) and writes the final ``metadata.yaml``,
-exactly once (also when rclpy shuts down first).
+exactly once (also when rclpy shuts down first). A writer stopped at the same time
+(``ros2 launch`` signals every process at once) waits for its last samples to be
+acknowledged before it leaves (``fourws_common.node_main``), re-sending what the loopback
+lost; the recorder stays for them while it sees the writer.
 """
 
 from __future__ import annotations
@@ -155,7 +159,8 @@ class RecorderConfig:
     compression: str = param("zstd", "chunk compression", choices=("zstd", "lz4", "none"))
     drain_quiet_s: float = param(0.3, "after a stop request, end once no message has come "
                                  "for this long", lo=0.0, hi=10.0, unit="s")
-    drain_max_s: float = param(2.0, "after a stop request, end after this long at most",
+    drain_max_s: float = param(3.0, "after a stop request, end after this long at most (more "
+                               "than a writer's wait for its acknowledgements, 2 s)",
                                lo=0.0, hi=60.0, unit="s")
     start_gate_topic: str = param("", "subscribe to this recorded topic only once every other "
                                   "per-step topic has a matched publisher (empty: all at once)")
@@ -256,8 +261,10 @@ class RecorderNode(Node):
         if gate and gate not in names:
             raise ValueError(f"start_gate_topic: {cfg.start_gate_topic} is not among the "
                              "recorded topics")
-        self._gate_waits = [i.name for i in infos if i.name != gate
-                            and qos_kind(graph_name(i.name, self.get_namespace())) == "control"]
+        per_step = [i.name for i in infos
+                    if qos_kind(graph_name(i.name, self.get_namespace())) == "control"]
+        self._gate_waits = [t for t in per_step if t != gate]
+        self._drain_waits = per_step  # a stop drains until their writers have left
         self._pending_gate = next((i for i in infos if i.name == gate), None)
         self._profiles, self._classes = profiles, classes
         self._started_at = time.monotonic()
@@ -375,8 +382,15 @@ class RecorderNode(Node):
         cfg = self.params.config
         now = time.monotonic()
         quiet = now - max(self._last_rx, self._stop_requested_at) >= cfg.drain_quiet_s
-        if quiet or now - self._stop_requested_at >= cfg.drain_max_s:
+        writers = [t for t in self._drain_waits if self.matched.get(t, 0) > 0]
+        if quiet and not writers:
             self.done = True
+        elif now - self._stop_requested_at >= cfg.drain_max_s:
+            self.done = True
+            if writers:
+                self.get_logger().warning(
+                    f"stopped draining after {cfg.drain_max_s:.1f} s with writers still on "
+                    f"{', '.join(writers)}: their last messages may be missing")
 
     def finalise(self) -> None:
         """Finish the MCAP file and write metadata.yaml; runs once, whoever calls first."""
