@@ -108,6 +108,30 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
     assert {j.condition.seed for j in extra} == set(range(60))
 
 
+def test_the_gain_diagnostic_is_the_realistic_condition_with_the_shipped_scaling_times_k():
+    """benchmarks/gain_diagnostic.yaml writes the realistic condition out (to override the
+    MPC's scaling): it must stay that condition, and k = 1 must be the shipped preset."""
+    import dataclasses
+    from pathlib import Path
+
+    from fourws_bringup.core.conditions import load_condition
+    from fourws_bringup.core.configs import load_mpc_config
+
+    spec = Path(__file__).resolve().parents[2] / "benchmarks" / "gain_diagnostic.yaml"
+    by = {j.condition.name: j.condition for j in load_spec(spec)}
+    realistic = load_condition("realistic")
+    for name, cond in by.items():
+        differs = {f.name for f in dataclasses.fields(cond)
+                   if getattr(cond, f.name) != getattr(realistic, f.name)}
+        assert differs == {"name", "mpc_overrides", "seed"} - (
+            {"seed"} if cond.seed == realistic.seed else set()), name
+    shipped = load_mpc_config("improved")
+    assert by["sY_x1"].mpc_overrides == {"scale_y_m": shipped.scale_y_m}
+    for k in (2, 4):
+        assert by[f"k{k}"].mpc_overrides == pytest.approx(
+            {"scale_y_m": k * shipped.scale_y_m, "scale_phi_deg": k * shipped.scale_phi_deg})
+
+
 def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
     from pathlib import Path
 
