@@ -56,6 +56,10 @@ PROFILE_ENV = "FOURWS_PROFILE"
 DONE_POLL_PERIOD_S = 0.02
 #: Longest wait (s, in all) at shutdown for a node's reliable samples to be acknowledged.
 STOP_ACK_TIMEOUT_S = 2.0
+#: Housekeeping topics not waited for at shutdown: their last samples are no part of a run's
+#: record (in a container process the /diagnostics writers went unacknowledged for the whole
+#: 2 s while the recorder was up, and every composed run's stop took 2 s longer).
+NO_ACK_WAIT_TOPICS = frozenset({"/diagnostics", "/rosout", "/parameter_events"})
 
 
 def make_executor(name: str | None = None) -> Executor:
@@ -151,12 +155,15 @@ def wait_for_acks(nodes: Sequence[Node], timeout_s: float) -> bool:
     samples acknowledged by every matched reader; say on stderr which did not. True if all did.
 
     A reader that leaves the graph is unmatched and no longer waited for; best-effort
-    publishers return at once (``Publisher.wait_for_all_acked``).
+    publishers return at once (``Publisher.wait_for_all_acked``); the housekeeping topics of
+    ``NO_ACK_WAIT_TOPICS`` are not waited for.
     """
     deadline = time.monotonic() + timeout_s
     late: list[str] = []
     for node in nodes:
         for pub in list(node.publishers):
+            if pub.topic_name in NO_ACK_WAIT_TOPICS:
+                continue
             left = max(0.0, deadline - time.monotonic())
             try:
                 if not pub.wait_for_all_acked(Duration(seconds=left)):
