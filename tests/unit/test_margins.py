@@ -140,6 +140,15 @@ def test_compensating_the_known_delays_and_lags_restores_the_margin(controller):
         assert off.spectral_radius > 1.0
 
 
+def _first_step(ctrl, cfg, vx, sample=None):
+    """The controller's answer at t = 0 on a straight at vx to ``sample`` (default: 1 mm of
+    lateral offset and 3e-4 rad of front steer, the state the margins tests linearise at)."""
+    path = np.arange(0.0, 200.0, 0.05)
+    z = np.zeros_like(path)
+    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
+    return ctrl.step(0.0, sample or VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+
+
 @pytest.mark.parametrize("controller", ["mpc_4ws", "lqr_ff"])
 def test_the_margins_gain_is_the_controllers_first_move_with_compensation(controller):
     """The linear loop's controller row (the gain on the extended state and the delay buffer)
@@ -160,10 +169,7 @@ def test_the_margins_gain_is_the_controllers_first_move_with_compensation(contro
     ctrl = make_controller(cfg)
     ctrl.sent.registers[:] = sent
     ctrl.u_prev = sent[0].copy()
-    path = np.arange(0.0, 200.0, 0.05)
-    z = np.zeros_like(path)
-    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
-    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    res = _first_step(ctrl, cfg, vx)
     assert not res.fallback
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
 
@@ -223,10 +229,7 @@ def test_the_margins_observer_is_the_controllers_slip_observer():
     ctrl.sent.registers[:] = sent
     ctrl.u_prev = sent[0].copy()
     ctrl.model_memory = memory
-    path = np.arange(0.0, 200.0, 0.05)
-    z = np.zeros_like(path)
-    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
-    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.01, 0.005, 3e-4, -1e-4), ref)
+    res = _first_step(ctrl, cfg, vx, VehicleSample(0.0, 1e-3, 0.0, vx, 0.01, 0.005, 3e-4, -1e-4))
     assert not res.fallback
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
 
@@ -291,10 +294,7 @@ def test_the_margins_gain_includes_the_level_penalty():
     ctrl = make_controller(cfg)
     ctrl.u_prev = u_prev.copy()
     ctrl.sent.registers[:] = u_prev
-    path = np.arange(0.0, 200.0, 0.05)
-    z = np.zeros_like(path)
-    ref = cfg.reference(path, z, z, z, np.full_like(path, vx))
-    res = ctrl.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    res = _first_step(ctrl, cfg, vx)
     assert not res.fallback
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
     # and the penalty acts: without it the same step keeps more of the yaw moment
@@ -303,5 +303,5 @@ def test_the_margins_gain_includes_the_level_penalty():
         "state_bounds": False, "mz_level_weight": 0.0}))
     free.u_prev = u_prev.copy()
     free.sent.registers[:] = u_prev
-    kept = free.step(0.0, VehicleSample(0.0, 1e-3, 0.0, vx, 0.0, 0.0, 3e-4, 0.0), ref)
+    kept = _first_step(free, cfg, vx)
     assert abs(res.yaw_moment) < abs(kept.yaw_moment)

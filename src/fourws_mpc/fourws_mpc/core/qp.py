@@ -57,6 +57,7 @@ plan; only a solution the solver calls optimal is used (``qp_solver.trusted``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -148,10 +149,19 @@ def input_level_cost(n_p: int, n_c: int, D: np.ndarray, s_eff: np.ndarray
     M (3Nc, 3Nc) the cumulative sum times D, and w (3Nc,) the level weights per planned step,
     the last step's counted N_p − N_c + 1 times (held to the horizon's end). The cost adds
     ΔŨᵀ Mᵀ diag(w) M ΔŨ + 2 u_tᵀ diag(w) M ΔŨ (+ const) for u_t = u(k−1) tiled."""
+    cum, hold = _level_structure(n_p, n_c)
+    return cum * D[None, :], np.kron(hold, s_eff)
+
+
+@lru_cache(maxsize=64)
+def _level_structure(n_p: int, n_c: int) -> tuple[np.ndarray, np.ndarray]:
+    """The horizon-only part of :func:`input_level_cost` (built once per (N_p, N_c), not
+    every step; read-only)."""
     cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(N_INPUT))
     hold = np.ones(n_c)
     hold[-1] = n_p - n_c + 1
-    return cum * D[None, :], np.kron(hold, s_eff)
+    cum.flags.writeable = hold.flags.writeable = False
+    return cum, hold
 
 
 @dataclass(frozen=True)
