@@ -43,7 +43,8 @@ def test_a_realistic_condition_becomes_plant_mpc_and_allocator_parameters():
     assert len(plant["noise_sigma"]) == len(plant["noise_tau_s"]) == len(CHANNELS)
     assert plant["noise_sigma"][CHANNELS.index("y")] == 0.02
     assert plant["noise_tau_s"][CHANNELS.index("y")] == 1.0
-    assert plant["noise_sigma"][CHANNELS.index("vx")] == 0.0
+    assert plant["noise_sigma"][CHANNELS.index("vy")] == 0.035
+    assert plant["noise_tau_s"][CHANNELS.index("vx")] == 0.0       # white
     assert plant["delay_periods"] == 1 and plant["steer_dead_time_s"] == pytest.approx(0.04)
     assert plant["tyre_forces"] == "estimated"
     # the state then carries no adhesion: the MPC's bound uses the nominal μ; the delays are

@@ -100,7 +100,7 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
 
     assert sorted({j.controller for j in jobs}) == list_controllers()   # every shipped preset
     noisy = {j.condition.name for j in jobs if j.condition.seed == 4}
-    assert noisy == {"noise_gm", "noise_white", "all"}          # five seeds where noise is
+    assert noisy == {"noise_gm", "noise_white", "noise_velocity", "all"}  # five seeds: noise
     for j in jobs:
         __import__("fourws_sim.core.scenario", fromlist=["load_scenario"]).load_scenario(
             j.scenario)
@@ -130,6 +130,29 @@ def test_the_gain_diagnostic_is_the_realistic_condition_with_the_shipped_scaling
     for k in (2, 4):
         assert by[f"k{k}"].mpc_overrides == pytest.approx(
             {"scale_y_m": k * shipped.scale_y_m, "scale_phi_deg": k * shipped.scale_phi_deg})
+
+
+def test_the_localisation_sensitivity_is_the_realistic_condition_with_the_fix_scaled():
+    """benchmarks/localisation_sensitivity.yaml writes the realistic condition out: each of
+    its conditions differs from it only in the x, y position error's sigma (tau kept), and
+    2.0 cm is realistic itself."""
+    import dataclasses
+    from pathlib import Path
+
+    from fourws_bringup.core.conditions import load_condition
+
+    spec = Path(__file__).resolve().parents[2] / "benchmarks" / "localisation_sensitivity.yaml"
+    by = {j.condition.name: j.condition for j in load_spec(spec)}
+    realistic = load_condition("realistic")
+    assert sorted(by) == ["xy_0p5cm", "xy_1p0cm", "xy_1p5cm", "xy_2p0cm"]
+    for name, cond in by.items():
+        sigma = float(name[3:6].replace("p", ".")) / 100.0
+        assert {ch: (sp.sigma, sp.tau_s) for ch, sp in cond.noise.items() if ch in "xy"} == {
+            "x": (sigma, 1.0), "y": (sigma, 1.0)}, name
+        same = dataclasses.replace(
+            cond, name="realistic", seed=realistic.seed,
+            noise={**cond.noise, "x": realistic.noise["x"], "y": realistic.noise["y"]})
+        assert same == realistic, name
 
 
 def test_the_ranking_study_is_a_sweep_spec_of_its_140_cases():
