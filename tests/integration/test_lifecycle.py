@@ -20,6 +20,7 @@ import pytest
 import yaml
 from conftest import cut_scenario
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.duration import Duration
 
 from fourws_bringup import runner
 from fourws_bringup.bag.run_data import read_run
@@ -137,7 +138,7 @@ def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
                             .read_text(encoding="utf-8"))
     preset["/**/mpc_node"]["ros__parameters"].update(
         controller="paper_mpc_fws", prediction_model="single_track",
-        prediction_discretisation="euler", scale_phi_deg=0.30)
+        prediction_discretisation="euler", scale_y_m=0.0059, scale_phi_deg=0.30)
     path = tmp_path / "paper_mpc_fws.yaml"
     path.write_text(yaml.safe_dump(preset), encoding="utf-8")
     r = subprocess.run(["fourws", "run", "--scenario", "dlc_60_mu05", "--controller",
@@ -236,7 +237,12 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
         "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip", "steer_front",
         "steer_rear", "wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")})
     stray.header.stamp = ns_to_stamp(10**6 * 10**9)
+    # every reader of the topic (recorder, controllers, this test) has matched the stray's
+    # writer before it is sent, and has acknowledged it before the run is judged
+    assert ros.spin_until(lambda: 2 <= len(ros.node.get_subscriptions_info_by_topic(
+        "/vehicle/state")) <= stray_pub.get_subscription_count(), 30)
     stray_pub.publish(stray)
+    assert stray_pub.wait_for_all_acked(Duration(seconds=10))
     assert sup.wait_exit("plant_node", timeout_s=120) == 0
     sup.stop()
     m = score_run(tmp_path / "bag")

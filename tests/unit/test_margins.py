@@ -72,9 +72,9 @@ def test_predicted_growth_rate_matches_the_nonlinear_loop(dead_s, t0, t1):
 
 
 #: the paper's MPC as first shipped: eq. (1)-(4) (no steering lag, forward Euler) and the first
-#: output scaling (s_φ = 0.30°, before the tuning procedure)
+#: output scaling (s_Y 5.9 mm, s_φ = 0.30°: the package defaults, before the tuning procedure)
 PAPER = {"prediction_model": "single_track", "prediction_discretisation": "euler",
-         "scale_phi_deg": 0.30}
+         "scale_y_m": 0.0059, "scale_phi_deg": 0.30}
 
 
 def test_the_paper_prediction_leaves_the_fixed_weight_presets_unstable_on_the_ideal_plant():
@@ -212,13 +212,15 @@ def test_the_margins_observer_is_the_controllers_slip_observer():
                                       "state_bounds": False})
     p = cfg.model_params()
     _, _, _, K_f = closed_loop(cfg, V, vx)
-    sent = np.array([[1e-3, -5e-4, 0.0], [5e-4, 0.0, 0.0], [0.0, 5e-4, 0.0],
-                     [-5e-4, 0.0, 0.0], [2e-3, 0.0, 0.0]])
+    # a state small enough that the first move stays inside the increment bound (0.8°)
+    a = 0.25
+    sent = a * np.array([[1e-3, -5e-4, 0.0], [5e-4, 0.0, 0.0], [0.0, 5e-4, 0.0],
+                         [-5e-4, 0.0, 0.0], [2e-3, 0.0, 0.0]])
     x = np.zeros(K_f.shape[1])
-    x[E1], x[DF], x[DR], x[VY], x[R] = 1e-3, 3e-4, -1e-4, 0.01, 0.005
+    x[E1], x[DF], x[DR], x[VY], x[R] = a * 1e-3, a * 3e-4, a * -1e-4, a * 0.01, a * 0.005
     x[N_PLANT:N_PLANT + sent.size] = sent.reshape(-1)
     # the observer's memory: last estimate and last kinematic slip, as the loop's m(k)
-    memory = ObserverMemory((2e-4, -3e-4), (4e-4, -1e-4))
+    memory = ObserverMemory((a * 2e-4, a * -3e-4), (a * 4e-4, a * -1e-4))
     i_obs = N_PLANT + sent.size
     for j, sig in enumerate((p.relaxation_length_front_m, p.relaxation_length_rear_m)):
         xx = cfg.dt_s * vx / sig
@@ -229,8 +231,10 @@ def test_the_margins_observer_is_the_controllers_slip_observer():
     ctrl.sent.registers[:] = sent
     ctrl.u_prev = sent[0].copy()
     ctrl.model_memory = memory
-    res = _first_step(ctrl, cfg, vx, VehicleSample(0.0, 1e-3, 0.0, vx, 0.01, 0.005, 3e-4, -1e-4))
+    res = _first_step(ctrl, cfg, vx, VehicleSample(0.0, a * 1e-3, 0.0, vx, a * 0.01, a * 0.005,
+                                                   a * 3e-4, a * -1e-4))
     assert not res.fallback
+    assert abs(res.delta_front - sent[0][0]) < math.radians(0.8) * 0.9    # bound inactive
     assert res.delta_front == pytest.approx(float(K_f[0] @ x), rel=2e-3)
 
 
@@ -261,7 +265,8 @@ def test_the_yaw_moment_level_penalty_pins_the_free_direction():
     """Increment-only costs leave a yaw moment held by counter-steer free: a λ = 1 mode of
     the nominal loop (improved at 60 km/h, every mode counted). A level penalty on M_z moves it
     inside the unit circle; with the model's cornering stiffness 30 % low the free direction
-    drifts (ρ > 1) without the penalty and not with it."""
+    drifts (ρ > 1) without the penalty and slower with it (stable only with a heavier κ than
+    the shipped one since stop 30's scaling: the next test)."""
     from fourws_bringup.core.margins import closed_loop
 
     def rho_all(overrides):
@@ -273,7 +278,21 @@ def test_the_yaw_moment_level_penalty_pins_the_free_direction():
     assert rho_all({"mz_level_weight": 0.0}) == pytest.approx(1.0, abs=1e-4)
     assert rho_all({"mz_level_weight": 0.0043}) < 0.97
     assert rho_all({"mz_level_weight": 0.0, **low}) > 1.02
-    assert rho_all({"mz_level_weight": 0.0043, **low}) < 1.0
+    assert rho_all({"mz_level_weight": 0.0043, **low}) < rho_all({"mz_level_weight": 0.0, **low})
+    assert rho_all({"mz_level_weight": 0.01, **low}) < 1.0
+
+
+@pytest.mark.xfail(strict=True, reason="open (issue 18, stop 30): with the stop-30 scaling (output "
+                   "weights x4) the derived kappa 0.0043 no longer holds C_alpha 30 % low: rho "
+                   "1.027 (docs/mpc.md, 'The yaw moment's level')")
+def test_the_shipped_level_penalty_holds_a_cornering_stiffness_30_percent_low():
+    from fourws_bringup.core.margins import closed_loop
+
+    low = {"cornering_stiffness_front_static_n_per_rad": 19595.8,
+           "cornering_stiffness_rear_static_n_per_rad": 20999.3}
+    for kmh in (60, 90):
+        A = closed_loop(load_mpc_config("improved", low), V, kmh / 3.6)[0]
+        assert _rho(A) < 1.0, kmh
 
 
 def test_the_margins_gain_includes_the_level_penalty():
