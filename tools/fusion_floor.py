@@ -100,18 +100,18 @@ def kalman(e: Mapping[str, np.ndarray], v: float, dt_s: float,
     none = NoiseSpec()
     sy, sp = noise["y"], noise["yaw"]
     sr, svy = noise.get("yaw_rate", none), noise.get("vy", none)
-    gm = [(2, sy), (3, sp)]                                 # (state index, its error's spec)
+    gm = [sy, sp]                    # the Gauss-Markov errors, states 2, 3, ... in this order
     i_r = i_vy = None
     if bias is not None and bias.sigma > 0.0:
-        i_r = 4
-        gm.append((i_r, bias))
+        i_r = 2 + len(gm)
+        gm.append(bias)
     if svy.sigma > 0.0 and svy.tau_s > 0.0:
-        i_vy = 4 + len(gm) - 2
-        gm.append((i_vy, svy))
-    n = 4 + len(gm) - 2
+        i_vy = 2 + len(gm)
+        gm.append(svy)
+    n = 2 + len(gm)
     F, Q, P = np.eye(n), np.zeros((n, n)), np.zeros((n, n))
     F[0, 1] = v * dt_s
-    for i, spec in gm:
+    for i, spec in enumerate(gm, start=2):
         phi = math.exp(-dt_s / spec.tau_s)
         F[i, i], Q[i, i], P[i, i] = phi, spec.sigma ** 2 * (1 - phi ** 2), spec.sigma ** 2
     P[0, 0], P[1, 1] = sy.sigma ** 2, sp.sigma ** 2
@@ -148,13 +148,12 @@ def analyse(noise: Mapping[str, NoiseSpec], speeds_mps: list[float], seeds: int,
     after ``warmup`` steps of running on the same (stationary) streams."""
     rows = []
     data = [streams(noise, s, warmup + steps, dt_s, bias) for s in range(seeds)]
-    raw = np.array([d["y"][warmup:] for d in data])
 
     def scores(est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # per seed: max, RMS
         w = est[:, warmup:]
         return np.abs(w).max(axis=1), np.sqrt(np.mean(w * w, axis=1))
 
-    raw_max, raw_rms = scores(np.pad(raw, ((0, 0), (warmup, 0))))
+    raw_max, raw_rms = scores(np.array([d["y"] for d in data]))
     for v in speeds_mps:
         cells = {c: scores(np.array([complementary(d, v, dt_s, *c) for d in data]))
                  for c in grid}
