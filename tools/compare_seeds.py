@@ -11,6 +11,11 @@ assumed) and the mean paired difference with its 95 % confidence interval (Stude
 much better or worse the data allow, not only whether they differ). Markdown on stdout. Only
 completed runs of seeds both controllers have are paired;
 a seed with a run that did not complete is counted as lost for that controller.
+
+With ``--margin M`` (in the metric's unit, declared before the data are seen): a
+non-inferiority test, H0 "the controller is worse by M or more" (mean paired difference
+≥ M) against H1 "worse by less than M", one-sided paired t-test at 2.5 %; it rejects H0
+exactly when the upper end of the 95 % interval above lies below M.
 """
 
 from __future__ import annotations
@@ -39,9 +44,10 @@ def read_rows(path: Path, metric: str, condition: str | None
     return out
 
 
-def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
-            ) -> list[dict]:
-    """One dict per (scenario, controller other than the reference)."""
+def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str,
+            margin: float | None = None) -> list[dict]:
+    """One dict per (scenario, controller other than the reference); with ``margin`` also
+    ``p_noninferior`` (one-sided p of H0: mean difference ≥ margin)."""
     table = []
     for scenario in sorted({s for s, _ in rows}):
         ref = rows.get((scenario, reference))
@@ -58,6 +64,8 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
             p = (float(wilcoxon(diff).pvalue) if len(diff) >= 6 and any(diff) else None)
             ci = (tuple(float(v) for v in ttest_1samp(diff, 0.0).confidence_interval(0.95))
                   if len(diff) >= 3 and statistics.pstdev(diff) > 0.0 else None)
+            p_ni = (float(ttest_1samp(diff, margin, alternative="less").pvalue)
+                    if margin is not None and ci is not None else None)
             table.append({
                 "scenario": scenario, "controller": c, "reference": reference,
                 "median": statistics.median(done) if done else None,
@@ -67,7 +75,8 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
                 "lost": len(runs) - len(done), "ref_lost": len(ref) - len(ref_done),
                 "pairs": len(seeds), "paired_median_diff": statistics.median(diff) if diff
                 else None, "better": sum(d < 0 for d in diff), "p": p,
-                "mean_diff": statistics.fmean(diff) if diff else None, "mean_diff_ci95": ci})
+                "mean_diff": statistics.fmean(diff) if diff else None, "mean_diff_ci95": ci,
+                "margin": margin, "p_noninferior": p_ni})
     return table
 
 
@@ -76,8 +85,10 @@ def markdown(table: list[dict], metric: str, scale: float, unit: str) -> str:
         return "—" if v is None else f"{v * scale:.1f}"
     lines = [f"{metric} in {unit}; paired by seed against the reference (Wilcoxon two-sided)",
              "", "| scenario | controller | median (worst) | reference median (worst) | "
-             "paired median diff | better on | p | mean diff [95 % CI] |",
-             "|---|---|---|---|---|---|---|---|"]
+             "paired median diff | better on | p | mean diff [95 % CI] |"
+             + (" non-inferior at margin |" if table and table[0]["margin"] is not None else ""),
+             "|---|---|---|---|---|---|---|---|"
+             + ("---|" if table and table[0]["margin"] is not None else "")]
     for r in table:
         p = "—" if r["p"] is None else f"{r['p']:.3f}"
         lost = f", {r['lost']} lost" if r["lost"] else ""
@@ -87,8 +98,18 @@ def markdown(table: list[dict], metric: str, scale: float, unit: str) -> str:
         lines.append(f"| {r['scenario']} | {r['controller']} | {f(r['median'])} "
                      f"({f(r['worst'])}){lost} | {r['reference']} {f(r['ref_median'])} "
                      f"({f(r['ref_worst'])}){ref_lost} | {f(r['paired_median_diff'])} | "
-                     f"{r['better']} of {r['pairs']} | {p} | {mean} |")
+                     f"{r['better']} of {r['pairs']} | {p} | {mean} |"
+                     + _noninferior_cell(r, f))
     return "\n".join(lines) + "\n"
+
+
+def _noninferior_cell(r: dict, f) -> str:
+    if r["margin"] is None:
+        return ""
+    if r["p_noninferior"] is None:
+        return " — |"
+    verdict = "yes" if r["p_noninferior"] < 0.025 else "not shown"
+    return f" {verdict} at {f(r['margin'])} (p {r['p_noninferior']:.3g}) |"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,13 +118,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reference", default="lqr_ff")
     ap.add_argument("--metric", default="max_abs_lateral_error_m")
     ap.add_argument("--condition", default=None, help="only this condition (default: all rows)")
+    ap.add_argument("--margin", type=float, default=None,
+                    help="non-inferiority margin in the metric's unit (declared in advance)")
     a = ap.parse_args(argv)
     if not a.csv.is_file():
         print(f"compare_seeds: {a.csv}: no such file", file=sys.stderr)
         return 2
     rows = read_rows(a.csv, a.metric, a.condition)
     metres = a.metric.endswith("_m")
-    sys.stdout.write(markdown(compare(rows, a.reference), a.metric, 1000.0 if metres else 1.0,
+    table = compare(rows, a.reference, a.margin)
+    sys.stdout.write(markdown(table, a.metric, 1000.0 if metres else 1.0,
                               "mm" if metres else "its unit"))
     return 0
 

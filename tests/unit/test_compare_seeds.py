@@ -55,3 +55,23 @@ def test_a_tie_is_not_significant_and_a_lost_run_is_counted_not_paired(tmp_path)
     assert r["lost"] == 1 and r["pairs"] == 9 and r["p"] > 0.5
     lo, hi = r["mean_diff_ci95"]
     assert lo < 0.0 < hi                  # a tie: the interval holds zero
+
+
+def test_non_inferiority_is_shown_only_when_the_interval_lies_below_the_margin(tmp_path):
+    """A controller worse by 1 mm ± 2 mm over 40 seeds: non-inferior at a 5 mm margin, not
+    at 1 mm (the interval holds the margin); the verdict agrees with the interval's end."""
+    vals = {}
+    for s in range(40):
+        vals[("ref", s)] = 0.060 + 0.0005 * (s % 7)
+        vals[("a", s)] = vals[("ref", s)] + 0.001 + 0.002 * (1 if s % 2 else -1)
+    rows = cs.read_rows(_write(tmp_path, vals), "max_abs_lateral_error_m", "all")
+    (wide,) = cs.compare(rows, "ref", margin=0.005)
+    (tight,) = cs.compare(rows, "ref", margin=0.001)
+    assert wide["mean_diff"] == pytest.approx(0.001, abs=1e-9)
+    assert wide["mean_diff_ci95"][1] < 0.005 and wide["p_noninferior"] < 0.025
+    assert tight["mean_diff_ci95"][1] > 0.001 and tight["p_noninferior"] > 0.025
+    md = cs.markdown([wide], "max_abs_lateral_error_m", 1000.0, "mm")
+    assert "yes at 5.0" in md
+    assert "not shown at 1.0" in cs.markdown([tight], "max_abs_lateral_error_m", 1000.0, "mm")
+    assert "non-inferior" not in cs.markdown(cs.compare(rows, "ref"),
+                                             "max_abs_lateral_error_m", 1000.0, "mm")
