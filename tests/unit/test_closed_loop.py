@@ -64,8 +64,9 @@ def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenar
 
 @pytest.mark.slow
 def test_table_8_the_yaw_moment_is_used_and_the_allocation_ties():
-    """Table 8 on dlc_60_mu05: the DYC presets command a yaw moment of a few hundred N·m and
-    AMPC-4WS none; with rear steer already holding the path to a millimetre, the moment moves
+    """Table 8 on dlc_60_mu05: the DYC presets command a yaw moment and AMPC-4WS none (about a
+    hundred N·m: 113 with the level penalty κ 0.0088, 231 with 0.0043); with rear steer
+    already holding the path to a millimetre, the moment moves
     max |e_Y| by less than 1 mm either way (the paper: 171 → 124 mm, a car without the rear
     axle's authority). Rule-based and load-ratio allocation of that moment tie (e_Y within
     0.1 mm, sideslip within 0.01°): they only split each side's torque front/rear differently."""
@@ -74,7 +75,7 @@ def test_table_8_the_yaw_moment_is_used_and_the_allocation_ties():
         log = run_closed_loop("dlc_60_mu05", c)
         m[c], mz[c] = log.metrics(), float(np.abs(log.mpc["yaw_moment"]).max())
         assert m[c]["completed"], m[c]
-    assert mz["ampc_4ws"] == 0.0 and 100.0 < mz["improved"] < 1500.0, mz
+    assert mz["ampc_4ws"] == 0.0 and 30.0 < mz["improved"] < 1500.0, mz
     e = {c: m[c]["max_abs_lateral_error_m"] for c in m}
     assert abs(e["improved"] - e["ampc_4ws"]) < 1e-3, e
     for key in ("max_abs_lateral_error_m", "rmse_lateral_error_m"):

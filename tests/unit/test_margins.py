@@ -266,7 +266,7 @@ def test_the_yaw_moment_level_penalty_pins_the_free_direction():
     the nominal loop (improved at 60 km/h, every mode counted). A level penalty on M_z moves it
     inside the unit circle; with the model's cornering stiffness 30 % low the free direction
     drifts (ρ > 1) without the penalty, slower with the light κ of a 0.2 s decay, and not at
-    all with a heavier one."""
+    all with a heavier one (the shipped κ's rule: the next test)."""
     from fourws_bringup.core.margins import closed_loop
 
     def rho_all(overrides):
@@ -291,23 +291,34 @@ def _cornering_stiffness_times(f):
              "cornering_stiffness_rear_static_n_per_rad")}
 
 
-def test_the_level_penalty_is_the_slowest_decay_that_holds_a_cornering_stiffness_30_percent_off():
-    """mpc.yaml's rule for κ: τ is the slowest of 0.2, 0.1, 0.05 s whose κ keeps every preset
-    with a yaw moment at ρ ≤ 0.98 (all modes, the free one included) when the controller's
-    cornering stiffness is 30 % low or high, at 60 and 90 km/h. The shipped κ does; τ = 0.1 s
-    does not (the stiffness 30 % low drives the free direction: docs/mpc.md)."""
+def test_the_level_penalty_is_the_decay_with_the_lowest_worst_radius_over_the_model_errors():
+    """mpc.yaml's rule for κ = (e^{T/τ} − 1)/N_p: of τ = 0.2, 0.1, 0.05 s, the one whose worst
+    ρ (all modes, the free one included) over the bench's model errors (the controller's
+    cornering stiffness 30 % low or high, its mass and inertia 20 % high, steering actuators
+    of 50 ms it is not told of), at 60 and 90 km/h, for the presets with a yaw moment, is the
+    lowest. A slower decay lets the low stiffness drive the free direction (ρ > 1); a faster
+    one costs margin against the slow steering (docs/mpc.md)."""
+    import dataclasses
+
     from fourws_bringup.core.margins import closed_loop
 
-    def rho(preset, kmh, f, overrides=None):
-        cfg = load_mpc_config(preset, {**_cornering_stiffness_times(f), **(overrides or {})})
-        return _rho(closed_loop(cfg, V, kmh / 3.6)[0])
+    slow = dataclasses.replace(V, steer_front_time_constant_s=0.05,
+                               steer_rear_time_constant_s=0.05)
+    errors = [(V, _cornering_stiffness_times(0.7)), (V, _cornering_stiffness_times(1.3)),
+              (V, {"mass_kg": 900.0, "yaw_inertia_kg_m2": 900.0}), (slow, {})]
 
-    for preset in ("improved", "ampc_4ws_dyc", "improved_np30"):
-        for kmh in (60, 90):
-            for f in (0.7, 1.3):
-                assert rho(preset, kmh, f) <= 0.98, (preset, kmh, f)
-    slower = (math.exp(0.01 / 0.1) - 1.0) / 12
-    assert rho("improved", 60, 0.7, {"mz_level_weight": slower}) > 0.98
+    def worst(kappa):
+        return max(_rho(closed_loop(load_mpc_config(p, {**ov, "mz_level_weight": kappa}),
+                                    plant, kmh / 3.6)[0])
+                   for p in ("improved", "improved_np30") for kmh in (60, 90)
+                   for plant, ov in errors)
+
+    shipped = load_mpc_config("improved").mz_level_weight
+    family = {tau: (math.exp(0.01 / tau) - 1.0) / 12 for tau in (0.2, 0.1, 0.05)}
+    radius = {tau: worst(k) for tau, k in family.items()}
+    best = min(radius, key=radius.get)
+    assert shipped == pytest.approx(family[best], rel=0.01), radius
+    assert radius[0.2] > 1.0 and radius[best] < 1.0, radius      # the drift, and its fix
 
 
 def test_the_margins_gain_includes_the_level_penalty():

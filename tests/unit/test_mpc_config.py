@@ -119,11 +119,11 @@ def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
 
 
 def test_the_yaw_moment_level_weight_follows_its_stated_rule():
-    """mpc.yaml: κ = (e^{T/τ} − 1)/N_p with τ = 0.05 s, so that a yaw moment held by
+    """mpc.yaml: κ = (e^{T/τ} − 1)/N_p with τ = 0.1 s, so that a yaw moment held by
     counter-steer decays by 1/(1 + κ N_p) = e^{−T/τ} per period (docs/mpc.md; why τ is
-    0.05 s: tests/unit/test_margins.py)."""
+    0.1 s: tests/unit/test_margins.py)."""
     import math
 
     cfg = MpcConfig()
-    rule = (math.exp(cfg.dt_s / 0.05) - 1.0) / cfg.np_baseline
+    rule = (math.exp(cfg.dt_s / 0.1) - 1.0) / cfg.np_baseline
     assert cfg.mz_level_weight == pytest.approx(rule, rel=0.01)
