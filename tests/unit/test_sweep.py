@@ -198,3 +198,28 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, capsys):
     code = sweep_cli(str(spec), str(tmp_path / "out"), 1, scheduler="tcp://127.0.0.1:9",
                      connect_timeout_s=2.0)
     assert code == 2 and "scheduler tcp://127.0.0.1:9" in capsys.readouterr().err
+
+
+def test_a_run_uses_one_blas_thread_whatever_the_process(swept, monkeypatch):
+    """run_job limits every BLAS to one thread while the run lasts (a multi-threaded BLAS
+    may sum in another order, and a near-chaotic noisy run turns the last bit into
+    millimetres: the row would depend on the worker layout), and gives the limit back."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import fourws_bringup.core.closed_loop as closed_loop
+    from fourws_bringup import sweep
+
+    seen = []
+
+    def spy(*args, **kwargs):
+        seen.append([i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"])
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(closed_loop, "run_closed_loop", spy)
+    jobs, _, _ = swept
+    with threadpool_limits(limits=2, user_api="blas"):
+        row = sweep.run_job(jobs[0])
+        after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    assert seen and seen[0] and set(seen[0]) == {1}, seen
+    assert "stop here" in row["reason"] and row["completed"] is False
+    assert after and max(after) <= 2

@@ -118,12 +118,20 @@ def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> l
 
 
 def run_job(job: Job) -> dict[str, Any]:
-    """One row: the run's metrics, or its failure."""
+    """One row: the run's metrics, or its failure.
+
+    The run uses one BLAS thread, whatever the process: a multi-threaded BLAS may sum in
+    another order, and a noisy closed loop that is close to chaotic (mpc_4ws under white
+    noise) turns a last-bit difference into millimetres, so without the limit a row would
+    depend on whether it ran serially, in a pool or on a cluster."""
+    from threadpoolctl import threadpool_limits
+
     from .core.closed_loop import run_closed_loop
 
     row: dict[str, Any] = dict(zip(LEAD, job.key, strict=True))
     try:
-        log = run_closed_loop(job.scenario, job.controller, condition=job.condition)
+        with threadpool_limits(limits=1, user_api="blas"):
+            log = run_closed_loop(job.scenario, job.controller, condition=job.condition)
         m = log.metrics()
         m.pop("scenario", None)
         m.pop("controller", None)
