@@ -237,10 +237,15 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
         "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip", "steer_front",
         "steer_rear", "wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")})
     stray.header.stamp = ns_to_stamp(10**6 * 10**9)
-    # every reader of the topic (recorder, controllers, this test) has matched the stray's
-    # writer before it is sent, and has acknowledged it before the run is judged
-    assert ros.spin_until(lambda: 2 <= len(ros.node.get_subscriptions_info_by_topic(
-        "/vehicle/state")) <= stray_pub.get_subscription_count(), 30)
+    # every reader of the topic (recorder, controllers, this test: the readers the plant
+    # waited for) has matched the stray's writer before it is sent, and has acknowledged it
+    # before the run is judged. Counting the readers this node has discovered is not enough:
+    # the recorder subscribes to /vehicle/state last (its start gate), and once this node had
+    # not yet discovered it, so the stray went to every reader but the recorder.
+    readers = specs[0].parameters["wait_for_subscribers"]
+    assert ros.spin_until(lambda: readers <= stray_pub.get_subscription_count() and len(
+        ros.node.get_subscriptions_info_by_topic("/vehicle/state"))
+        <= stray_pub.get_subscription_count(), 30)
     stray_pub.publish(stray)
     assert stray_pub.wait_for_all_acked(Duration(seconds=10))
     assert sup.wait_exit("plant_node", timeout_s=120) == 0
