@@ -94,6 +94,7 @@ from fourws_common.topics import (
 )
 from fourws_common.wheels import JOINT_NAMES
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
+from fourws_sim.core.localisation import LOCALISATION_METHODS
 from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, sensors_from_params
 from fourws_sim.core.simulator import Simulator
@@ -148,6 +149,9 @@ class PlantNodeConfig:
     tyre_forces: str = param("oracle", "oracle: /vehicle/state carries the true tyre forces, "
                              "loads and adhesion (the paper's idealised setting); estimated: "
                              "those fields are 0 (no car measures them)", choices=TYRE_SOURCES)
+    localisation: str = param("none", "the pose the controllers receive: none, the measured "
+                              "state; ekf, a localisation filter that knows the noise's "
+                              "models (core.localisation)", choices=LOCALISATION_METHODS)
     vehicle_overrides: str = param("", "plant overrides over the scenario's vehicle, a YAML "
                                    "mapping of vehicle.yaml fields (e.g. a slower steering "
                                    "actuator); empty: none")
@@ -180,7 +184,8 @@ class PlantNode(Node):
                                            steer_dead_time_s=cfg.steer_dead_time_s)
         self.sensors = sensors_from_params(
             {f: getattr(cfg, f) for f in ("noise_sigma", "noise_tau_s", "noise_seed",
-                                          "delay_periods", "tyre_forces")},
+                                          "delay_periods", "tyre_forces",
+                                          "localisation")},
             cfg.dt_s, initial_command=((0.0, 0.0), np.zeros(4)))
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
@@ -254,7 +259,8 @@ class PlantNode(Node):
             log.info(f"bench: noise on {sorted(self.sensors.noise.specs) or 'no channel'} "
                      f"(seed {cfg.noise_seed}), delay {cfg.delay_periods} periods, steering "
                      f"dead time {cfg.steer_dead_time_s * 1e3:g} ms, tyre data "
-                     f"{cfg.tyre_forces}, vehicle overrides {cfg.vehicle_overrides or 'none'}")
+                     f"{cfg.tyre_forces}, localisation {cfg.localisation}, vehicle overrides "
+                     f"{cfg.vehicle_overrides or 'none'}")
         # monotonic s: the first state published; the publication of the first state that was
         # answered (the run's wall time counts from here; the wait between the two is start-up:
         # nodes still discovering each other).

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from fourws_common.params import read_yaml_file
+from fourws_sim.core.localisation import LOCALISATION_METHODS
 from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, NoiseSpec, noise_specs
 
 
@@ -43,10 +44,17 @@ class Condition:
     #: ``steer_dead_time_s``), as a car's integrator who measured them would: the MPC then
     #: compensates them (``fourws_mpc.core.delay``). Off: the controller does not know them.
     known_delays: bool = False
+    #: how the controllers' pose is localised (``fourws_sim.core.localisation``): ``none``,
+    #: the measured state as it is (the paper's and the bench's default); ``ekf``, a
+    #: localisation filter that knows the sensors' error models (beyond the paper)
+    localisation: str = "none"
 
     def __post_init__(self) -> None:
         if self.tyre_forces not in TYRE_SOURCES:
             raise ValueError(f"tyre_forces: '{self.tyre_forces}' is not one of {TYRE_SOURCES}")
+        if self.localisation not in LOCALISATION_METHODS:
+            raise ValueError(f"localisation: '{self.localisation}' is not one of "
+                             f"{LOCALISATION_METHODS}")
         if not (isinstance(self.delay_periods, int) and 0 <= self.delay_periods <= 100):
             raise ValueError(f"delay_periods: expected an integer 0..100, got "
                              f"{self.delay_periods!r}")
@@ -61,18 +69,20 @@ class Condition:
         """The paper's setting: truth in, no delay, oracle tyre data, no override."""
         return (not any(s.sigma > 0.0 for s in self.noise.values()) and not self.delay_periods
                 and not self.steer_dead_time_s and self.tyre_forces == "oracle"
-                and not self.mpc_overrides and not self.vehicle_overrides)
+                and not self.mpc_overrides and not self.vehicle_overrides
+                and self.localisation == "none")
 
 
 IDEAL = Condition()
 
 _KEYS = {"name", "noise", "delay_periods", "steer_dead_time_ms", "tyre_forces", "mu_nominal",
-         "mpc_overrides", "vehicle_overrides", "seed", "known_delays"}
+         "mpc_overrides", "vehicle_overrides", "seed", "known_delays", "localisation"}
 
 
 def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Condition:
     """From YAML: ``noise: {y: {sigma: 0.02, tau_s: 1.0}, ...}``, ``delay_periods``,
-    ``steer_dead_time_ms``, ``tyre_forces``, ``mu_nominal``, ``mpc_overrides``, ``seed``."""
+    ``steer_dead_time_ms``, ``tyre_forces``, ``mu_nominal``, ``mpc_overrides``, ``seed``,
+    ``known_delays``, ``localisation``."""
     unknown = sorted(set(d) - _KEYS)
     if unknown:
         raise ValueError(f"condition: unknown key(s) {unknown} (known: {sorted(_KEYS)})")
@@ -85,7 +95,8 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         mpc_overrides=dict(d.get("mpc_overrides") or {}),
         vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
         seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0),
-        known_delays=_flag(d.get("known_delays", False), "known_delays"))
+        known_delays=_flag(d.get("known_delays", False), "known_delays"),
+        localisation=str(d.get("localisation", "none")))
 
 
 def _flag(v: Any, name: str) -> bool:
@@ -106,9 +117,11 @@ def _conditions_dir() -> Path:
 
 
 def condition_mapping(raw: Any) -> dict[str, Any]:
-    """A condition's mapping from a spec entry: the mapping itself (``None`` is ideal), or
-    the name of a shipped condition (``realistic``: ``config/conditions/realistic.yaml``),
-    so a spec and ``fourws paper`` share one definition."""
+    """A condition's mapping from a spec entry: the mapping itself (``None`` is ideal), the
+    name of a shipped condition (``realistic``: ``config/conditions/realistic.yaml``), so a
+    spec and ``fourws paper`` share one definition, or a mapping with ``base: NAME``: that
+    shipped condition with the mapping's other keys over it
+    (``{base: realistic, localisation: ekf}``)."""
     if raw is None:
         return {}
     if isinstance(raw, str):
@@ -120,7 +133,13 @@ def condition_mapping(raw: Any) -> dict[str, Any]:
     if not isinstance(raw, Mapping):
         raise ValueError(f"condition: a mapping of {sorted(_KEYS)} or a shipped condition's "
                          f"name, got {raw!r}")
-    return dict(raw)
+    raw = dict(raw)
+    base = raw.pop("base", None)
+    if base is None:
+        return raw
+    if not isinstance(base, str):
+        raise ValueError(f"condition base: the name of a shipped condition, got {base!r}")
+    return {**condition_mapping(base), **raw}
 
 
 def load_condition(arg: str, seed: int | None = None) -> Condition:
@@ -155,7 +174,8 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
 
     * ``plant_node``: the sensing and timing (``noise_sigma``/``noise_tau_s`` per channel of
       ``sensing.CHANNELS``, ``noise_seed``, ``delay_periods``, ``steer_dead_time_s``), whether
-      the state carries the true tyre data (``tyre_forces``), plant overrides
+      the state carries the true tyre data (``tyre_forces``), the localisation filter
+      (``localisation``), plant overrides
       (``vehicle_overrides``, a YAML mapping) and ``publish_ground_truth``;
     * ``mpc_node``: the model-mismatch overrides, with ``known_delays`` the delay and dead
       time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ (the
@@ -170,6 +190,8 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
         plant["noise_sigma"] = [condition.noise.get(ch, zero).sigma for ch in CHANNELS]
         plant["noise_tau_s"] = [condition.noise.get(ch, zero).tau_s for ch in CHANNELS]
         plant["noise_seed"] = int(condition.seed)
+    if condition.localisation != "none":
+        plant["localisation"] = condition.localisation
     if condition.delay_periods:
         plant["delay_periods"] = int(condition.delay_periods)
     if condition.steer_dead_time_s:

@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from fourws_sim.core.localisation import pose_filter
+
 #: the measured channels noise can act on (VehicleState field names)
 CHANNELS = ("x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay")
 
@@ -175,7 +177,9 @@ class Sensors:
 
     :meth:`measure` turns the plant's outputs of a new step into the state the controllers
     receive: the noise of :class:`MeasurementNoise` on the measured channels (one draw per
-    step: call it once per new state, never for a repeat), the sideslip β = atan2(v_y, v_x)
+    step: call it once per new state, never for a repeat), with ``localisation: ekf`` the
+    pose of a localisation filter that knows those errors' models
+    (``fourws_sim.core.localisation``) in place of the raw fix, the sideslip β = atan2(v_y, v_x)
     of the measured velocities, and — unless ``tyre_forces`` is ``oracle`` — zero in the
     fields no car measures (:data:`UNMEASURED_WHEEL_FIELDS`: tyre forces, loads, adhesion).
     :meth:`act` is the computation delay (:class:`DelayLine`) on the commands. With no noise,
@@ -184,13 +188,15 @@ class Sensors:
 
     def __init__(self, noise: Mapping[str, NoiseSpec] | None, dt_s: float, seed: int = 0,
                  delay_periods: int = 0, tyre_forces: str = "oracle",
-                 initial_command: Any = None) -> None:
+                 initial_command: Any = None, localisation: str = "none") -> None:
         if tyre_forces not in TYRE_SOURCES:
             raise ValueError(f"tyre_forces: '{tyre_forces}' is not one of {TYRE_SOURCES}")
         self.noise = MeasurementNoise(dict(noise or {}), dt_s, seed)
         self.tyre_forces = tyre_forces
         self.delay = DelayLine(delay_periods, initial_command)
-        self.sensed = self.noise.active or tyre_forces != "oracle"
+        self.localiser = pose_filter(localisation, dict(noise or {}), dt_s)
+        self.sensed = (self.noise.active or tyre_forces != "oracle"
+                       or self.localiser is not None)
         self.ideal = not self.sensed and delay_periods == 0
 
     def measure(self, out: Any) -> Any:
@@ -198,7 +204,10 @@ class Sensors:
         if not self.sensed:
             return out
         seen = dataclasses.replace(out)
-        if self.noise.apply(seen):
+        noisy = bool(self.noise.apply(seen))
+        if self.localiser is not None:
+            noisy = self.localiser.apply(seen) or noisy
+        if noisy:
             seen.sideslip = math.atan2(seen.vy, seen.vx)
         if self.tyre_forces != "oracle":
             for name in UNMEASURED_WHEEL_FIELDS:
@@ -215,8 +224,8 @@ def sensors_from_params(values: Mapping[str, Any], dt_s: float,
                         initial_command: Any = None) -> Sensors:
     """:class:`Sensors` of the plant's parameters (``plant_node``'s ``noise_sigma`` and
     ``noise_tau_s``, one value per channel of :data:`CHANNELS` in order; ``noise_seed``,
-    ``delay_periods``, ``tyre_forces``): the plant node and the in-process loop build their
-    bench from the same values."""
+    ``delay_periods``, ``tyre_forces``, ``localisation``): the plant node and the in-process
+    loop build their bench from the same values."""
     sigma = tuple(values.get("noise_sigma") or (0.0,) * len(CHANNELS))
     tau = tuple(values.get("noise_tau_s") or (0.0,) * len(CHANNELS))
     if len(sigma) != len(CHANNELS) or len(tau) != len(CHANNELS):
@@ -226,4 +235,5 @@ def sensors_from_params(values: Mapping[str, Any], dt_s: float,
              for ch, s, t in zip(CHANNELS, sigma, tau, strict=True) if float(s) > 0.0}
     return Sensors(noise, dt_s, int(values.get("noise_seed", 0)),
                    int(values.get("delay_periods", 0)),
-                   str(values.get("tyre_forces", "oracle")), initial_command)
+                   str(values.get("tyre_forces", "oracle")), initial_command,
+                   str(values.get("localisation", "none")))
