@@ -183,17 +183,18 @@ REALISTIC = {
               "yaw": {"sigma": 0.001745, "tau_s": 1.0}, "yaw_rate": {"sigma": 0.002},
               "ax": {"sigma": 0.05}, "ay": {"sigma": 0.05}},
     "delay_periods": 1, "steer_dead_time_ms": 10, "tyre_forces": "estimated",
-    "mu_nominal": 0.8,
+    "mu_nominal": 0.8, "localisation": "ekf",
     "vehicle_overrides": {"steer_front_time_constant_s": 0.03,
                           "steer_rear_time_constant_s": 0.03},
 }
 
 
 def test_a_realistic_run_over_topics_equals_the_in_process_loop(tmp_path):
-    """Noise, delay, dead time, estimated tyre data and a plant override are applied by the
-    nodes themselves (``node_parameters``): the recorded ground truth and commands equal the
-    in-process loop's for the same seed, the controllers' /vehicle/state is the sensed one
-    (no tyre truth on the wire), and the metrics are computed on the truth."""
+    """Noise, the localisation filter, delay, dead time, estimated tyre data and a plant
+    override are applied by the nodes themselves (``node_parameters``): the recorded ground
+    truth and commands equal the in-process loop's for the same seed, the controllers'
+    /vehicle/state is the sensed one (no tyre truth on the wire), and the metrics are
+    computed on the truth."""
     from fourws_bringup.core.conditions import condition_from_mapping
 
     cond = condition_from_mapping(REALISTIC, seed=3)
@@ -219,7 +220,7 @@ def test_a_realistic_run_over_topics_equals_the_in_process_loop(tmp_path):
                                    err_msg=key)
     np.testing.assert_allclose(run.wheel_torques["torque"][:n], log.wheel_torque_cmd_nm,
                                rtol=0, atol=1e-9)
-    # what the controllers saw: the truth plus noise, and no tyre data at all
+    # what the controllers saw: the truth plus the filtered noise, and no tyre data at all
     seen = run.state
     err = seen["y"] - truth["y"]
     assert 0.005 < float(np.std(err)) < 0.05, float(np.std(err))
