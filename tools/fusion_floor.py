@@ -30,7 +30,9 @@ the condition's velocity errors). Two estimators:
 * **Kalman** (model-aware; a lower bound): the linear Kalman filter with state
   [y, ψ, b_y, b_ψ(, b_r, b_vy)] that knows every error's model and σ exactly — the
   Gauss-Markov errors as states, the white ones as process noise. No real filter knows its
-  errors this well.
+  errors this well. The shipped localisation filter (``fourws_sim.core.localisation``,
+  ``localisation: ekf``) is its nonlinear form for the loop; this linear one is written
+  independently and is that filter's oracle in the tests.
 
 Both run ``--warmup-s`` on the (stationary) streams before the evaluated ``--steps``: a car's
 filter has converged when a manoeuvre starts. Per speed and estimator: the median over seeds

@@ -10,7 +10,9 @@ The bench's plant side (``fourws_sim.core.sensing.Sensors``, set by a run's cond
 controllers see ``/vehicle/state`` (and ``/vehicle/odom``) as a car's sensors give it —
 seeded white or Gauss-Markov noise per channel (``noise_sigma``, ``noise_tau_s``,
 ``noise_seed``; one draw per new state, a republished state is the same message) and, with
-``tyre_forces: estimated``, zero in the tyre force, load and adhesion fields. Their commands
+``tyre_forces: estimated``, zero in the tyre force, load and adhesion fields; with
+``localisation: ekf`` the pose of a localisation filter (``core.localisation``, beyond the
+paper) in place of the raw fix. Their commands
 act ``delay_periods`` steps late, the steering after ``steer_dead_time_s`` more.
 ``publish_ground_truth`` adds the true state on ``/vehicle/ground_truth`` (scored instead of
 the sensed one). ``vehicle_overrides`` changes the plant's vehicle (not the controllers').
