@@ -54,18 +54,21 @@ def _straight(noise, seed: int, steps: int, v: float):
 
 def test_on_a_straight_the_filter_is_the_linear_kalman_filter_of_fusion_floor():
     """tools/fusion_floor.py's Kalman filter is an independent, linearised formulation (state
-    [y, ψ, b_y, b_ψ, b_vy], the straight-path model y' = v ψ + v_y): on the same error
-    streams the EKF's lateral estimate agrees with it to well under a millimetre once the
-    two priors are forgotten (fusion_floor's starts from zero, this one from the first fix;
-    20 s: the mode that tells the fix's error from the position decays slowly)."""
+    [y, ψ, b_y, b_ψ, b_vy], the straight-path model y' = v ψ + v_y, Euler with the start of
+    the period's odometry): on the same error streams the EKF's lateral estimate follows it
+    to about a millimetre (the two integrate the white odometry errors by different rules)
+    once their priors are forgotten (fusion_floor's starts from zero, this one from the first
+    fix; 20 s)."""
     ff = _fusion_floor()
     noise = _realistic_noise()
     v = 60.0 / 3.6
     for seed in (0, 1):
         _, est, _ = _straight(noise, seed, 4000, v)
         kf = ff.kalman(ff.streams(noise, seed, 4000, DT), v, DT, noise)
-        assert np.max(np.abs(est[2000:, Pose.Y] - kf[2000:])) < 2e-4
+        d = est[2000:, Pose.Y] - kf[2000:]
+        assert np.max(np.abs(d)) < 3e-3 and np.sqrt(np.mean(d * d)) < 1e-3
         assert np.max(np.abs(kf[2000:])) > 0.02   # both see a real error, not zero
+        assert np.corrcoef(est[2000:, Pose.Y], kf[2000:])[0, 1] > 0.99
 
 
 def test_the_jacobians_are_the_transitions_derivatives():
@@ -76,43 +79,62 @@ def test_the_jacobians_are_the_transitions_derivatives():
     for _ in range(5):
         s = rng.normal(size=f.n) * 0.3
         s[Pose.YAW] = rng.uniform(-math.pi, math.pi)
-        odo = (float(rng.uniform(5, 30)), float(rng.normal()), float(rng.normal() * 0.5))
-        F, G = f.jacobians(s, odo)
+        odo0 = (float(rng.uniform(5, 30)), float(rng.normal()), float(rng.normal() * 0.5))
+        odo1 = tuple(np.add(odo0, rng.normal(size=3) * 0.2))
+        F, G0, G1 = f.jacobians(s, odo0, odo1)
         h = 1e-6
-        F_fd = np.column_stack([(f.transition(s + h * e, odo) - f.transition(s - h * e, odo))
-                                / (2 * h) for e in np.eye(f.n)])
-        G_fd = np.column_stack([
-            (f.transition(s, tuple(np.add(odo, h * e))) - f.transition(s, tuple(np.subtract(
-                odo, h * e)))) / (2 * h) for e in np.eye(3)])
+        F_fd = np.column_stack([(f.transition(s + h * e, odo0, odo1)
+                                 - f.transition(s - h * e, odo0, odo1)) / (2 * h)
+                                for e in np.eye(f.n)])
+        G0_fd = np.column_stack([(f.transition(s, tuple(np.add(odo0, h * e)), odo1)
+                                  - f.transition(s, tuple(np.subtract(odo0, h * e)), odo1))
+                                 / (2 * h) for e in np.eye(3)])
+        G1_fd = np.column_stack([(f.transition(s, odo0, tuple(np.add(odo1, h * e)))
+                                  - f.transition(s, odo0, tuple(np.subtract(odo1, h * e))))
+                                 / (2 * h) for e in np.eye(3)])
         np.testing.assert_allclose(F, F_fd, atol=1e-8)
-        np.testing.assert_allclose(G, G_fd, atol=1e-8)
+        np.testing.assert_allclose(G0, G0_fd, atol=1e-8)
+        np.testing.assert_allclose(G1, G1_fd, atol=1e-8)
 
 
-def test_without_noise_the_filter_returns_the_truth_on_an_arc():
-    """Exact measurements on a circle (v 20 m/s, r 0.3 rad/s, with side-slip): the
-    mid-period heading makes the prediction second-order exact (v T (r T)² / 24 per period,
-    under 0.1 µm, which the filter's small fix gain lets add up to some 20 µm), so the
-    estimate is the truth although the filter believes the realistic errors."""
-    v_x, v_y, r = 20.0, -0.4, 0.3
-    speed = math.hypot(v_x, v_y)
-    beta = math.atan2(v_y, v_x)
+def test_without_noise_the_filter_returns_the_truth_on_a_weave():
+    """Exact measurements of a car weaving (v_x 20 m/s, side-slip and yaw rate swinging at
+    2 rad/s, r up to 0.3 rad/s; the truth integrated 100 times finer): the trapezoidal
+    prediction is second-order exact, so the estimate is the truth although the filter
+    believes the realistic errors. A prediction with the start of the period's odometry
+    alone would lag by half a period: T r / 2 = 1.5 mrad of heading."""
+    v_x, w = 20.0, 2.0
+
+    def odo(t: float) -> tuple[float, float, float]:
+        return v_x, 0.5 * math.sin(w * t), 0.3 * math.sin(w * t)
+
     f = PoseFilter(_realistic_noise(), DT)
-    worst = 0.0
-    for k in range(1500):
-        t = k * DT
-        psi = 0.2 + r * t
-        # the centre of the circle the CG runs on, radius speed / r
-        x = 3.0 + speed / r * (math.sin(psi + beta) - math.sin(0.2 + beta))
-        y = -1.0 - speed / r * (math.cos(psi + beta) - math.cos(0.2 + beta))
-        s = f.update((x, y, math.atan2(math.sin(psi), math.cos(psi))), (v_x, v_y, r))
-        worst = max(worst, abs(s[Pose.X] - x), abs(s[Pose.Y] - y))
-        assert abs(math.remainder(s[Pose.YAW] - psi, 2 * math.pi)) < 1e-7
-    assert worst < 1e-4
+    x, y, psi, t, h = 3.0, -1.0, 3.0, 0.0, DT / 100
+    worst_p = worst_psi = 0.0
+    for _ in range(1000):
+        s = f.update((x, y, math.atan2(math.sin(psi), math.cos(psi))), odo(t))
+        worst_p = max(worst_p, abs(s[Pose.X] - x), abs(s[Pose.Y] - y))
+        worst_psi = max(worst_psi, abs(math.remainder(s[Pose.YAW] - psi, 2 * math.pi)))
+        for _ in range(100):              # RK4 of the truth over the period
+            def d(tt, ps):
+                vx, vy, r = odo(tt)
+                return (vx * math.cos(ps) - vy * math.sin(ps),
+                        vx * math.sin(ps) + vy * math.cos(ps), r)
+            k1 = d(t, psi)
+            k2 = d(t + h / 2, psi + h / 2 * k1[2])
+            k3 = d(t + h / 2, psi + h / 2 * k2[2])
+            k4 = d(t + h, psi + h * k3[2])
+            x += h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+            y += h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+            psi += h / 6 * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2])
+            t += h
+    assert worst_psi < 5e-5 and worst_p < 2e-4, (worst_psi, worst_p)
 
 
 def test_on_the_bench_streams_the_filter_beats_the_raw_fix_where_the_odometry_can():
     """The gyro (0.002 rad/s white) holds the heading far better than the 0.1° fix, and
-    the v_y error becomes a state; the position gains less, because dead reckoning drifts
+    the v_y error becomes a state; the position gains less (RMS 0.83-0.90 of the raw fix's
+    on seeds 0-2), because dead reckoning drifts
     with the v_y error (tools/fusion_floor.py). Measured after two correlation times."""
     noise = _realistic_noise()
     for seed in (0, 1, 2):
@@ -121,11 +143,11 @@ def test_on_the_bench_streams_the_filter_beats_the_raw_fix_where_the_odometry_ca
         y_raw = np.array([e["y"] for e in raw])[w]
         psi_raw = np.array([e["yaw"] for e in raw])[w]
         rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
-        assert rms(est[w, Pose.YAW]) < 0.5 * rms(psi_raw)
-        assert rms(est[w, Pose.Y]) < rms(y_raw)
+        assert rms(est[w, Pose.YAW]) < 0.5 * rms(psi_raw)     # measured 0.21-0.36
+        assert rms(est[w, Pose.Y]) < 0.95 * rms(y_raw)        # 0.83-0.90
         vy_raw = np.array([e["vy"] for e in raw])[w]
         vy_left = vy_raw - est[w, f.bias_index["vy"]]      # what the corrected v_y keeps
-        assert rms(vy_left) < rms(vy_raw)
+        assert rms(vy_left) < 0.9 * rms(vy_raw)               # 0.80-0.85
 
 
 def test_the_filters_covariance_is_its_error():
@@ -213,5 +235,40 @@ def test_the_localisation_is_a_condition_a_plant_parameter_and_part_of_the_senso
 
 
 def test_predict_pose_moves_along_the_heading():
-    p = predict_pose(np.array([0.0, 0.0, math.pi / 2]), 10.0, 0.0, 0.0, 0.1)
+    p = predict_pose(np.array([0.0, 0.0, math.pi / 2]), (10.0, 0.0, 0.0), (10.0, 0.0, 0.0),
+                     0.1)
     np.testing.assert_allclose(p, [0.0, 1.0, math.pi / 2], atol=1e-12)
+
+
+def test_apply_hands_on_the_estimate_and_the_bias_corrected_velocity():
+    """What the controllers receive: the estimated pose, and v_y minus the estimated v_y
+    error (the channels without an error state unchanged)."""
+    noise = _realistic_noise()
+    f = PoseFilter(noise, DT)
+    errs = MeasurementNoise(noise, DT, 7)
+    got, left, raw_vy = [], [], []
+    for k in range(1500):
+        e = errs.errors()
+        seen = _Seen(x=10.0 * k * DT + e["x"], y=e["y"], yaw=e["yaw"], vx=10.0 + e["vx"],
+                     vy=e["vy"], yaw_rate=e["yaw_rate"])
+        assert f.apply(seen)
+        est = f.s
+        assert (seen.x, seen.y) == (est[Pose.X], est[Pose.Y])
+        assert seen.yaw == pytest.approx(est[Pose.YAW], abs=1e-15)
+        assert seen.vy == pytest.approx(e["vy"] - est[f.bias_index["vy"]], abs=1e-15)
+        assert seen.vx == 10.0 + e["vx"] and seen.yaw_rate == e["yaw_rate"]   # white: as is
+        got.append(seen.y)
+        left.append(seen.vy)
+        raw_vy.append(e["vy"])
+    assert np.std(left[200:]) < 0.9 * np.std(raw_vy[200:])      # nearer the truth (0)
+
+
+def test_a_failed_update_restarts_the_filter_from_the_fix():
+    """A singular innovation covariance or a non-finite estimate (forced here) is counted and
+    the filter starts again from the current fix; nothing non-finite comes out."""
+    f = PoseFilter(_realistic_noise(), DT)
+    f.update((0.0, 0.0, 0.0), (10.0, 0.0, 0.0))
+    f.P[0, 0] = math.inf
+    s = f.update((0.1, 0.2, 0.01), (10.0, 0.0, 0.0))
+    assert f.restarts == 1 and np.all(np.isfinite(s))
+    np.testing.assert_allclose(s[:3], [0.1, 0.2, 0.01])

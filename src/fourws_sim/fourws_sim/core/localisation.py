@@ -12,15 +12,18 @@ is Gauss-Markov (τ > 0), that error b_c as a state of its own (:data:`FILTERED_
 order). A white error is process noise on what it is integrated into (odometry channels) or
 measurement noise (fix channels).
 
-Prediction over one period T with the previous step's odometry, bias-corrected
-(v̂_x = v_x,m − b_vx, v̂_y = v_y,m − b_vy, r̂ = r_m − b_r; a channel without a bias state
-uses its measurement), the heading taken at mid-period (second-order exact on an arc)::
+Prediction over one period T, from step k−1 to step k, with the odometry of both ends of
+the period, bias-corrected (v̂_x = v_x,m − b_vx, v̂_y = v_y,m − b_vy, r̂ = r_m − b_r; a channel
+without a bias state uses its measurement) — the trapezoidal rule, second-order exact, so
+the estimate does not lag the odometry by half a period::
 
-    ψ_mid = ψ + T r̂ / 2
-    x⁺ = x + T (v̂_x cos ψ_mid − v̂_y sin ψ_mid)
-    y⁺ = y + T (v̂_x sin ψ_mid + v̂_y cos ψ_mid)
-    ψ⁺ = ψ + T r̂
+    ψ⁺ = ψ + T (r̂_k−1 + r̂_k) / 2
+    p⁺ = p + T (w(ψ, v̂_k−1) + w(ψ⁺, v̂_k)) / 2,   w(ψ, v) = R(ψ) [v_x, v_y]  (world frame)
     b⁺ = φ b,  φ = exp(−T/τ),  driving-noise variance σ² (1 − φ²)
+
+A white odometry error enters through both ends of the period (process noise
+G_k−1 Σ G_k−1ᵀ + G_k Σ G_kᵀ; the correlation it leaves between consecutive periods is
+neglected).
 
 Measurement: the fix z = [x_m, y_m, ψ_m] = [x + b_x, y + b_y, ψ + b_ψ] + white; the heading
 innovation is wrapped to (−π, π].
@@ -69,13 +72,19 @@ def _wrap(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
 
-def predict_pose(p: np.ndarray, v_x: float, v_y: float, r: float, dt_s: float) -> np.ndarray:
-    """The pose one period on (module docstring) with body velocities v_x, v_y and yaw rate r."""
-    psi_mid = p[Pose.YAW] + 0.5 * dt_s * r
-    c, s = math.cos(psi_mid), math.sin(psi_mid)
-    return np.array([p[Pose.X] + dt_s * (v_x * c - v_y * s),
-                     p[Pose.Y] + dt_s * (v_x * s + v_y * c),
-                     p[Pose.YAW] + dt_s * r])
+def _world(psi: float, v_x: float, v_y: float) -> tuple[float, float]:
+    c, s = math.cos(psi), math.sin(psi)
+    return v_x * c - v_y * s, v_x * s + v_y * c
+
+
+def predict_pose(p: np.ndarray, odo0: tuple[float, float, float],
+                 odo1: tuple[float, float, float], dt_s: float) -> np.ndarray:
+    """The pose one period on (module docstring) from the body velocities and yaw rates
+    ``odo`` = (v_x, v_y, r) at the start (``odo0``) and the end (``odo1``) of the period."""
+    psi1 = p[Pose.YAW] + 0.5 * dt_s * (odo0[2] + odo1[2])
+    w0, w1 = _world(p[Pose.YAW], odo0[0], odo0[1]), _world(psi1, odo1[0], odo1[1])
+    return np.array([p[Pose.X] + 0.5 * dt_s * (w0[0] + w1[0]),
+                     p[Pose.Y] + 0.5 * dt_s * (w0[1] + w1[1]), psi1])
 
 
 class PoseFilter:
@@ -128,39 +137,50 @@ class PoseFilter:
         i = self.bias_index.get(ch)
         return float(s[i]) if i is not None else 0.0
 
-    def transition(self, s: np.ndarray, odo: tuple[float, float, float]) -> np.ndarray:
-        """The state one period on from ``s`` with the measured odometry
-        ``odo`` = (v_x,m, v_y,m, r_m)."""
-        v_x = odo[0] - self._bias(s, "vx")
-        v_y = odo[1] - self._bias(s, "vy")
-        r = odo[2] - self._bias(s, "yaw_rate")
+    def _corrected(self, s: np.ndarray, odo: tuple[float, float, float]
+                   ) -> tuple[float, float, float]:
+        return (odo[0] - self._bias(s, "vx"), odo[1] - self._bias(s, "vy"),
+                odo[2] - self._bias(s, "yaw_rate"))
+
+    def transition(self, s: np.ndarray, odo0: tuple[float, float, float],
+                   odo1: tuple[float, float, float]) -> np.ndarray:
+        """The state one period on from ``s`` with the measured odometry (v_x,m, v_y,m, r_m)
+        at the start (``odo0``) and the end (``odo1``) of the period."""
         out = self._phi * s
-        out[:len(Pose)] = predict_pose(s[:len(Pose)], v_x, v_y, r, self.dt_s)
+        out[:len(Pose)] = predict_pose(s[:len(Pose)], self._corrected(s, odo0),
+                                       self._corrected(s, odo1), self.dt_s)
         return out
 
-    def jacobians(self, s: np.ndarray, odo: tuple[float, float, float]
-                  ) -> tuple[np.ndarray, np.ndarray]:
-        """(F, G): ∂transition/∂s and ∂transition/∂(v_x,m, v_y,m, r_m) at ``s``."""
+    def jacobians(self, s: np.ndarray, odo0: tuple[float, float, float],
+                  odo1: tuple[float, float, float]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F, G0, G1): ∂transition/∂s and ∂transition/∂(v_x,m, v_y,m, r_m) of the start
+        and of the end of the period, at ``s``."""
         T = self.dt_s
-        v_x = odo[0] - self._bias(s, "vx")
-        v_y = odo[1] - self._bias(s, "vy")
-        r = odo[2] - self._bias(s, "yaw_rate")
-        psi_mid = s[Pose.YAW] + 0.5 * T * r
-        c, sn = math.cos(psi_mid), math.sin(psi_mid)
-        dx_dpsi = T * (-v_x * sn - v_y * c)
-        dy_dpsi = T * (v_x * c - v_y * sn)
-        G = np.zeros((self.n, 3))      # d(x, y, ψ)/d(v_x, v_y, r)
-        G[Pose.X] = (T * c, -T * sn, 0.5 * T * dx_dpsi)
-        G[Pose.Y] = (T * sn, T * c, 0.5 * T * dy_dpsi)
-        G[Pose.YAW] = (0.0, 0.0, T)
+        u0, u1 = self._corrected(s, odo0), self._corrected(s, odo1)
+        psi0 = float(s[Pose.YAW])
+        psi1 = psi0 + 0.5 * T * (u0[2] + u1[2])
+        c0, s0, c1, s1 = math.cos(psi0), math.sin(psi0), math.cos(psi1), math.sin(psi1)
+        dw0 = (-u0[0] * s0 - u0[1] * c0, u0[0] * c0 - u0[1] * s0)     # ∂w/∂ψ at each end
+        dw1 = (-u1[0] * s1 - u1[1] * c1, u1[0] * c1 - u1[1] * s1)
+        G0, G1 = np.zeros((self.n, 3)), np.zeros((self.n, 3))
+        # d(x, y, ψ)/d(v_x, v_y, r): the start's velocities move p directly; both yaw rates
+        # move ψ⁺, and through it the end's world velocity
+        G0[Pose.X] = (0.5 * T * c0, -0.5 * T * s0, 0.25 * T * T * dw1[0])
+        G0[Pose.Y] = (0.5 * T * s0, 0.5 * T * c0, 0.25 * T * T * dw1[1])
+        G0[Pose.YAW] = (0.0, 0.0, 0.5 * T)
+        G1[Pose.X] = (0.5 * T * c1, -0.5 * T * s1, 0.25 * T * T * dw1[0])
+        G1[Pose.Y] = (0.5 * T * s1, 0.5 * T * c1, 0.25 * T * T * dw1[1])
+        G1[Pose.YAW] = (0.0, 0.0, 0.5 * T)
         F = np.diag(self._phi)
         F[Pose.X, Pose.X] = F[Pose.Y, Pose.Y] = F[Pose.YAW, Pose.YAW] = 1.0
-        F[Pose.X, Pose.YAW], F[Pose.Y, Pose.YAW] = dx_dpsi, dy_dpsi
-        for j, ch in enumerate(("vx", "vy", "yaw_rate")):   # v̂ = v_m − b: ∂/∂b = −∂/∂v_m
+        F[Pose.X, Pose.YAW] = 0.5 * T * (dw0[0] + dw1[0])
+        F[Pose.Y, Pose.YAW] = 0.5 * T * (dw0[1] + dw1[1])
+        for j, ch in enumerate(("vx", "vy", "yaw_rate")):   # v̂ = v_m − b at both ends
             i = self.bias_index.get(ch)
             if i is not None:
-                F[:len(Pose), i] = -G[:len(Pose), j]
-        return F, G
+                F[:len(Pose), i] = -(G0[:len(Pose), j] + G1[:len(Pose), j])
+        return F, G0, G1
 
     # -- one step ----------------------------------------------------------------------
     def _start(self, z: np.ndarray) -> None:
@@ -188,25 +208,37 @@ class PoseFilter:
             return np.full(self.n, math.nan)
         if self.s is None or self.P is None or self._odo is None:
             self._start(z_a)
-        else:
-            F, G = self.jacobians(self.s, self._odo)
-            Qin = np.diag([self._white["vx"], self._white["vy"], self._white["yaw_rate"]])
-            Q = G @ Qin @ G.T + np.diag(self._q_bias)
-            Q[:len(Pose), :len(Pose)] += np.diag(np.square(MODEL_NOISE))
-            self.s = self.transition(self.s, self._odo)
-            self.P = F @ self.P @ F.T + Q
-            nu = z_a - self._H @ self.s
-            nu[Pose.YAW] = _wrap(float(nu[Pose.YAW]))
-            S = self._H @ self.P @ self._H.T + self._R
-            K = np.linalg.solve(S, self._H @ self.P).T
-            self.s = self.s + K @ nu
-            I_KH = np.eye(self.n) - K @ self._H
-            self.P = I_KH @ self.P @ I_KH.T + K @ self._R @ K.T    # Joseph form
-            if not (np.all(np.isfinite(self.s)) and np.all(np.isfinite(self.P))):
-                self.restarts += 1
-                self._start(z_a)
+            self._odo = (float(odo[0]), float(odo[1]), float(odo[2]))
+            return self.s.copy()
+        with np.errstate(invalid="ignore", over="ignore"):   # a failure restarts, below
+            self._step(z_a, (float(odo[0]), float(odo[1]), float(odo[2])))
         self._odo = (float(odo[0]), float(odo[1]), float(odo[2]))
         return self.s.copy()
+
+    def _step(self, z_a: np.ndarray, odo1: tuple[float, float, float]) -> None:
+        """Predict over the period (odometry at its start: ``self._odo``; at its end:
+        ``odo1``) and update with the fix ``z_a``."""
+        assert self.s is not None and self.P is not None and self._odo is not None
+        F, G0, G1 = self.jacobians(self.s, self._odo, odo1)
+        Qin = np.diag([self._white["vx"], self._white["vy"], self._white["yaw_rate"]])
+        Q = G0 @ Qin @ G0.T + G1 @ Qin @ G1.T + np.diag(self._q_bias)
+        Q[:len(Pose), :len(Pose)] += np.diag(np.square(MODEL_NOISE))
+        self.s = self.transition(self.s, self._odo, odo1)
+        self.P = F @ self.P @ F.T + Q
+        nu = z_a - self._H @ self.s
+        nu[Pose.YAW] = _wrap(float(nu[Pose.YAW]))
+        S = self._H @ self.P @ self._H.T + self._R
+        try:
+            K = np.linalg.solve(S, self._H @ self.P).T
+        except np.linalg.LinAlgError:
+            K = np.full((self.n, 3), math.nan)       # restarts below
+        self.s = self.s + K @ nu
+        I_KH = np.eye(self.n) - K @ self._H
+        P = I_KH @ self.P @ I_KH.T + K @ self._R @ K.T    # Joseph form
+        self.P = 0.5 * (P + P.T)
+        if not (np.all(np.isfinite(self.s)) and np.all(np.isfinite(self.P))):
+            self.restarts += 1
+            self._start(z_a)
 
     def apply(self, seen: Any) -> bool:
         """Replace ``seen``'s measured pose (and the bias-corrected odometry channels) by the
