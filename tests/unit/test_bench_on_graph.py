@@ -118,3 +118,22 @@ def test_known_delays_are_told_to_the_mpc_only_when_asked():
     assert told == {"input_delay_periods": 1, "steer_dead_time_s": pytest.approx(0.04)}
     with pytest.raises(ValueError, match="known_delays"):
         condition_from_mapping({**base, "known_delays": "yes"})
+
+
+def test_a_condition_extends_a_shipped_one_and_a_base_cycle_is_named(tmp_path, monkeypatch):
+    """``base: NAME`` is the shipped condition with the other keys over it (whole values);
+    a chain of bases that returns to itself is a clear error, not a recursion."""
+    from fourws_bringup.core import conditions
+
+    m = conditions.condition_mapping({"base": "realistic", "delay_periods": 2,
+                                      "noise": {"y": {"sigma": 0.01}}})
+    real = conditions.condition_mapping("realistic")
+    assert m["delay_periods"] == 2 and m["tyre_forces"] == real["tyre_forces"]
+    assert m["noise"] == {"y": {"sigma": 0.01}}          # replaced, not merged per channel
+    with pytest.raises(ValueError, match="shipped condition"):
+        conditions.condition_mapping({"base": 3})
+    (tmp_path / "a.yaml").write_text("base: b\ndelay_periods: 1\n")
+    (tmp_path / "b.yaml").write_text("base: a\n")
+    monkeypatch.setattr(conditions, "_conditions_dir", lambda: tmp_path)
+    with pytest.raises(ValueError, match="its own base"):
+        conditions.condition_mapping({"base": "a"})

@@ -116,12 +116,13 @@ def _conditions_dir() -> Path:
     return config_dir("fourws_bringup") / "conditions"
 
 
-def condition_mapping(raw: Any) -> dict[str, Any]:
+def condition_mapping(raw: Any, _bases: tuple[str, ...] = ()) -> dict[str, Any]:
     """A condition's mapping from a spec entry: the mapping itself (``None`` is ideal), the
     name of a shipped condition (``realistic``: ``config/conditions/realistic.yaml``), so a
     spec and ``fourws paper`` share one definition, or a mapping with ``base: NAME``: that
     shipped condition with the mapping's other keys over it
-    (``{base: realistic, localisation: ekf}``)."""
+    (``{base: realistic, localisation: ekf}``). A key replaces the base's whole value: a
+    ``noise`` given here is the condition's entire noise, not a change of some channels."""
     if raw is None:
         return {}
     if isinstance(raw, str):
@@ -139,7 +140,10 @@ def condition_mapping(raw: Any) -> dict[str, Any]:
         return raw
     if not isinstance(base, str):
         raise ValueError(f"condition base: the name of a shipped condition, got {base!r}")
-    return {**condition_mapping(base), **raw}
+    if base in _bases:
+        raise ValueError(f"condition base: '{base}' is its own base "
+                         f"({' -> '.join((*_bases, base))})")
+    return {**condition_mapping(base, (*_bases, base)), **raw}
 
 
 def load_condition(arg: str, seed: int | None = None) -> Condition:
