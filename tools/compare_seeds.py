@@ -3,11 +3,13 @@
 
     python tools/compare_seeds.py runs/lqr-comparison/results.csv --reference lqr_ff
         [--metric max_abs_lateral_error_m] [--condition all]
+    python tools/compare_seeds.py RESULTS --between all_ekf all_ekf_retuned
 
 For every scenario and every other controller: the median and worst of the metric, and,
-paired by seed against the reference, the median difference, how many seeds the controller
-is better (smaller) on, the two-sided Wilcoxon signed-rank p (scipy; no normality
-assumed) and the mean paired difference with its 95 % confidence interval (Student t: how
+paired by seed against the reference (with ``--between BASE OTHER``: each controller under
+condition OTHER against itself under BASE), the median difference, how many seeds the
+controller is better (smaller) on, the two-sided Wilcoxon signed-rank p (scipy; no
+normality assumed) and the mean paired difference with its 95 % confidence interval (Student t: how
 much better or worse the data allow, not only whether they differ). Markdown on stdout. Only
 completed runs of seeds both controllers have are paired;
 a seed with a run that did not complete is counted as lost for that controller.
@@ -54,30 +56,45 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
         if ref is None:
             continue
         for (s, c), runs in sorted(rows.items()):
-            if s != scenario or c == reference:
-                continue
-            seeds = sorted(k for k in runs if k in ref and runs[k] is not None
-                           and ref[k] is not None)
-            diff = [runs[k] - ref[k] for k in seeds]
-            done = [v for v in runs.values() if v is not None]
-            ref_done = [v for v in ref.values() if v is not None]
-            p = (float(wilcoxon(diff).pvalue) if len(diff) >= 6 and any(diff) else None)
-            ci = (tuple(float(v) for v in ttest_1samp(diff, 0.0).confidence_interval(0.95))
-                  if len(diff) >= 3 and statistics.pstdev(diff) > 0.0 else None)
-            p_ni = (float(ttest_1samp(diff, margin, alternative="less").pvalue)
-                    if margin is not None and ci is not None else None)
-            table.append({
-                "scenario": scenario, "controller": c, "reference": reference,
-                "median": statistics.median(done) if done else None,
-                "worst": max(done) if done else None,
-                "ref_median": statistics.median(ref_done) if ref_done else None,
-                "ref_worst": max(ref_done) if ref_done else None,
-                "lost": len(runs) - len(done), "ref_lost": len(ref) - len(ref_done),
-                "pairs": len(seeds), "paired_median_diff": statistics.median(diff) if diff
-                else None, "better": sum(d < 0 for d in diff), "p": p,
-                "mean_diff": statistics.fmean(diff) if diff else None, "mean_diff_ci95": ci,
-                "margin": margin, "p_noninferior": p_ni})
+            if s == scenario and c != reference:
+                table.append(paired(scenario, c, runs, reference, ref, margin))
     return table
+
+
+def compare_conditions(base: dict[tuple[str, str], dict[int, float | None]],
+                       other: dict[tuple[str, str], dict[int, float | None]],
+                       base_name: str, other_name: str,
+                       margin: float | None = None) -> list[dict]:
+    """Each controller under ``other`` paired by seed against itself under ``base``."""
+    return [paired(scenario, f"{c} {other_name}", other[(scenario, c)],
+                   f"{c} {base_name}", base[(scenario, c)], margin)
+            for scenario, c in sorted(set(base) & set(other))]
+
+
+def paired(scenario: str, name: str, runs: dict[int, float | None], ref_name: str,
+           ref: dict[int, float | None], margin: float | None) -> dict:
+    """The row of the table for ``runs`` against ``ref``, paired by seed."""
+    seeds = sorted(k for k in runs if k in ref and runs[k] is not None
+                   and ref[k] is not None)
+    diff = [runs[k] - ref[k] for k in seeds]
+    done = [v for v in runs.values() if v is not None]
+    ref_done = [v for v in ref.values() if v is not None]
+    p = (float(wilcoxon(diff).pvalue) if len(diff) >= 6 and any(diff) else None)
+    ci = (tuple(float(v) for v in ttest_1samp(diff, 0.0).confidence_interval(0.95))
+          if len(diff) >= 3 and statistics.pstdev(diff) > 0.0 else None)
+    p_ni = (float(ttest_1samp(diff, margin, alternative="less").pvalue)
+            if margin is not None and ci is not None else None)
+    return {
+        "scenario": scenario, "controller": name, "reference": ref_name,
+        "median": statistics.median(done) if done else None,
+        "worst": max(done) if done else None,
+        "ref_median": statistics.median(ref_done) if ref_done else None,
+        "ref_worst": max(ref_done) if ref_done else None,
+        "lost": len(runs) - len(done), "ref_lost": len(ref) - len(ref_done),
+        "pairs": len(seeds), "paired_median_diff": statistics.median(diff) if diff
+        else None, "better": sum(d < 0 for d in diff), "p": p,
+        "mean_diff": statistics.fmean(diff) if diff else None, "mean_diff_ci95": ci,
+        "margin": margin, "p_noninferior": p_ni}
 
 
 def markdown(table: list[dict], metric: str, scale: float, unit: str) -> str:
@@ -120,13 +137,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--condition", default=None, help="only this condition (default: all rows)")
     ap.add_argument("--margin", type=float, default=None,
                     help="non-inferiority margin in the metric's unit (declared in advance)")
+    ap.add_argument("--between", nargs=2, metavar=("BASE", "OTHER"), default=None,
+                    help="pair each controller under condition OTHER against itself under "
+                    "condition BASE (instead of against --reference)")
     a = ap.parse_args(argv)
     if not a.csv.is_file():
         print(f"compare_seeds: {a.csv}: no such file", file=sys.stderr)
         return 2
-    rows = read_rows(a.csv, a.metric, a.condition)
     metres = a.metric.endswith("_m")
-    table = compare(rows, a.reference, a.margin)
+    if a.between is not None:
+        base, other = (read_rows(a.csv, a.metric, c) for c in a.between)
+        table = compare_conditions(base, other, *a.between, a.margin)
+        if not table:
+            print(f"compare_seeds: no controller ran under both {a.between[0]!r} and "
+                  f"{a.between[1]!r}", file=sys.stderr)
+            return 2
+    else:
+        table = compare(read_rows(a.csv, a.metric, a.condition), a.reference, a.margin)
     sys.stdout.write(markdown(table, a.metric, 1000.0 if metres else 1.0,
                               "mm" if metres else "its unit"))
     return 0

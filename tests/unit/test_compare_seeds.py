@@ -75,3 +75,29 @@ def test_non_inferiority_is_shown_only_when_the_interval_lies_below_the_margin(t
     assert "not shown at 1.0" in cs.markdown([tight], "max_abs_lateral_error_m", 1000.0, "mm")
     assert "non-inferior" not in cs.markdown(cs.compare(rows, "ref"),
                                              "max_abs_lateral_error_m", 1000.0, "mm")
+
+
+def test_between_pairs_each_controller_with_itself_under_the_other_condition(tmp_path):
+    """``--between BASE OTHER``: a controller's seeds under OTHER against its own under BASE;
+    a controller missing from one condition is left out, and none in common is an error."""
+    path = tmp_path / "results.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, ["controller", "scenario", "condition", "seed", "completed",
+                               "max_abs_lateral_error_m"])
+        w.writeheader()
+        for s in range(8):
+            for cond, shift in (("base", 0.0), ("retuned", 0.003)):
+                w.writerow({"controller": "a", "scenario": "/x/s.yaml", "condition": cond,
+                            "seed": s, "completed": "True",
+                            "max_abs_lateral_error_m": 0.05 + 0.001 * s + shift
+                            + 0.0002 * (s % 2)})
+            w.writerow({"controller": "b", "scenario": "/x/s.yaml", "condition": "base",
+                        "seed": s, "completed": "True", "max_abs_lateral_error_m": 0.01})
+    base, other = (cs.read_rows(path, "max_abs_lateral_error_m", c)
+                   for c in ("base", "retuned"))
+    (r,) = cs.compare_conditions(base, other, "base", "retuned")
+    assert (r["controller"], r["reference"]) == ("a retuned", "a base")
+    assert r["pairs"] == 8 and r["better"] == 0
+    assert r["mean_diff"] == pytest.approx(0.003)
+    assert cs.main([str(path), "--between", "base", "retuned"]) == 0
+    assert cs.main([str(path), "--between", "base", "nowhere"]) == 2

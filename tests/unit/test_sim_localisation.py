@@ -5,7 +5,6 @@ covariance against its errors, and bad input."""
 
 from __future__ import annotations
 
-import dataclasses
 import importlib.util
 import math
 from pathlib import Path
@@ -20,6 +19,7 @@ from fourws_bringup.core.conditions import (
     node_parameters,
 )
 from fourws_sim.core.localisation import Pose, PoseFilter, predict_pose
+from fourws_sim.core.plant_io import PlantOutputs
 from fourws_sim.core.sensing import MeasurementNoise, NoiseSpec, Sensors, sensors_from_params
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -164,30 +164,22 @@ def test_the_filters_covariance_is_its_error():
     assert 0.8 < ratio < 1.25, ratio
 
 
-@dataclasses.dataclass
-class _Seen:
-    x: float = 1.0
-    y: float = 2.0
-    yaw: float = 0.1
-    vx: float = 10.0
-    vy: float = 0.0
-    yaw_rate: float = 0.0
-    ax: float = 0.0
-    ay: float = 0.0
-    sideslip: float = 0.0
-    fx: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(4))
-    fy: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(4))
-    fz: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(4))
-    mu: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(4))
+def _seen(**fields) -> PlantOutputs:
+    """A plant output with a plausible default for every field, ``fields`` replacing some."""
+    base = dict(t_s=0.0, x=1.0, y=2.0, yaw=0.1, vx=10.0, vy=0.0, yaw_rate=0.0, ax=0.0, ay=0.0,
+                sideslip=0.0, steer_front=0.0, steer_rear=0.0)
+    arrays = {name: np.ones(4) for name in ("wheel_speed", "wheel_torque", "fx", "fy", "fz",
+                                            "mu")}
+    return PlantOutputs(**(base | arrays | fields))
 
 
 def test_a_non_finite_measurement_is_refused_and_the_filter_starts_again():
     f = PoseFilter(_realistic_noise(), DT)
-    assert f.apply(_Seen()) and f.restarts == 0
-    bad = _Seen(y=math.nan)
+    assert f.apply(_seen()) and f.restarts == 0
+    bad = _seen(y=math.nan)
     assert not f.apply(bad) and math.isnan(bad.y) and bad.x == 1.0   # untouched, refused
     assert f.restarts == 1
-    good = _Seen(x=5.0, y=-3.0, yaw=-3.1)
+    good = _seen(x=5.0, y=-3.0, yaw=-3.1)
     assert f.apply(good)
     assert (good.x, good.y, good.yaw) == (5.0, -3.0, -3.1)     # restarted from this fix
     with pytest.raises(ValueError, match="dt_s"):
@@ -200,7 +192,7 @@ def test_the_heading_estimate_stays_continuous_across_the_wrap():
     r = 0.5
     for k in range(200):
         psi = math.pi - 0.5 + r * k * DT
-        seen = _Seen(x=0.0, y=0.0, yaw=math.atan2(math.sin(psi), math.cos(psi)), vx=0.0,
+        seen = _seen(x=0.0, y=0.0, yaw=math.atan2(math.sin(psi), math.cos(psi)), vx=0.0,
                      yaw_rate=r)
         assert f.apply(seen)
         assert abs(math.remainder(seen.yaw - psi, 2 * math.pi)) < 1e-6
@@ -226,7 +218,7 @@ def test_the_localisation_is_a_condition_a_plant_parameter_and_part_of_the_senso
     filt = sensors_from_params(plant, DT)
     assert isinstance(filt, Sensors) and filt.localiser is not None
     assert plain.localiser is None
-    truth = _Seen(vx=0.0)     # standing still: the odometry agrees with the fix
+    truth = _seen(vx=0.0)     # standing still: the odometry agrees with the fix
     for _ in range(50):
         a, b = plain.measure(truth), filt.measure(truth)
     assert a.y != b.y and abs(b.y - truth.y) < 0.1
@@ -249,7 +241,7 @@ def test_apply_hands_on_the_estimate_and_the_bias_corrected_velocity():
     got, left, raw_vy = [], [], []
     for k in range(1500):
         e = errs.errors()
-        seen = _Seen(x=10.0 * k * DT + e["x"], y=e["y"], yaw=e["yaw"], vx=10.0 + e["vx"],
+        seen = _seen(x=10.0 * k * DT + e["x"], y=e["y"], yaw=e["yaw"], vx=10.0 + e["vx"],
                      vy=e["vy"], yaw_rate=e["yaw_rate"])
         assert f.apply(seen)
         est = f.s
