@@ -2,6 +2,7 @@
 the MPC cores import nothing from ROS."""
 
 import dataclasses
+import math
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ from params_helpers import core_keys
 from fourws_bringup.core.configs import list_controllers
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
+from fourws_mpc.core.apcha import integrated_error
 from fourws_mpc.core.config import MpcConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -127,3 +129,14 @@ def test_the_yaw_moment_level_weight_follows_its_stated_rule():
     cfg = MpcConfig()
     rule = (math.exp(cfg.dt_s / 0.1) - 1.0) / cfg.np_baseline
     assert cfg.mz_level_weight == pytest.approx(rule, rel=0.01)
+
+
+@pytest.mark.parametrize("name", ["improved", "ampc_4ws", "ampc_4ws_dyc"])
+def test_eps1_is_a_tenth_of_a_metre_of_lateral_error_in_the_shipped_apcha_presets(name):
+    """What docs/mpc.md says ε1 = 0.2 means: e_s of eq. (7) is dimensionless (e_Y over
+    0.5 m, e_φ over 8°, λ 0.5), so N_p leaves its floor at |e_Y| 0.1 m alone or 3.2° of
+    heading error alone, not at the paper's "0.2 m"."""
+    p = _preset(name)[0].apcha_params()
+    assert integrated_error(0.1, 0.0, p) == pytest.approx(p.eps1)
+    assert integrated_error(0.0, math.radians(3.2), p) == pytest.approx(p.eps1)
+    assert integrated_error(0.2, 0.0, p) == pytest.approx(2 * p.eps1)   # the "0.2 m": 2ε1
