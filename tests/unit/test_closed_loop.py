@@ -87,7 +87,7 @@ def test_table_8_the_yaw_moment_is_used_and_the_allocation_ties():
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario, seed, condition", [
     ("dlc_60_mu05", 0, "robustness.yaml#all"), ("dlc_90_mu06", 1, "robustness.yaml#all"),
-    ("dlc_60_mu05", 2, "localisation_filter.yaml#all_ekf")])
+    ("dlc_60_mu05", 2, "robustness.yaml#all_ekf")])
 def test_realistic_world_every_preset_completes_and_the_lead_out_does_not_grow(scenario, seed,
                                                                                condition):
     """Under the bench's "all" (localisation and IMU noise, 1 period of delay, 40 ms of

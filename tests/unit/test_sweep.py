@@ -100,7 +100,7 @@ def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
 
     assert sorted({j.controller for j in jobs}) == list_controllers()   # every shipped preset
     noisy = {j.condition.name for j in jobs if j.condition.seed == 4}
-    assert noisy == {"noise_gm", "noise_white", "noise_velocity", "all"}  # five seeds: noise
+    assert noisy == {"noise_gm", "noise_white", "noise_velocity", "all", "all_ekf"}  # noise
     for j in jobs:
         __import__("fourws_sim.core.scenario", fromlist=["load_scenario"]).load_scenario(
             j.scenario)
