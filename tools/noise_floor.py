@@ -91,11 +91,16 @@ def spec_section(path: Path, spec: Path, dt_s: float = 0.01, channel: str = "y")
         names = sorted({r["condition"] for r in csv.DictReader(f)})
     parts = []
     for name in names:
-        noise = load_condition(f"{spec}#{name}").noise
+        condition = load_condition(f"{spec}#{name}")
+        noise = condition.noise
         if channel not in noise:
             continue
-        parts.append(f"### {name}\n\n" + markdown(analyse(path, noise, dt_s, channel, name),
-                                                  channel))
+        note = ("" if condition.localisation == "none" else
+                f"With the localisation filter (`{condition.localisation}`) the controllers "
+                "received its estimate, not the raw fix: the floor below is the raw fix's "
+                "error, the filter's input, so a ratio below 1 is partly the filter's work.\n\n")
+        parts.append(f"### {name}\n\n" + note
+                     + markdown(analyse(path, noise, dt_s, channel, name), channel))
     return "\n".join(parts)
 
 

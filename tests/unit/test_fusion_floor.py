@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
 import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+from plant_helpers import plant_output
 
 from fourws_sim.core.sensing import NoiseSpec, Sensors
 
@@ -21,25 +21,14 @@ NOISE = {"y": NoiseSpec(0.02, 1.0), "yaw": NoiseSpec(0.001745, 1.0),
 DT = 0.01
 
 
-@dataclasses.dataclass
-class _Out:  # a plant output at rest on the x axis
-    x: float = 0.0
-    y: float = 0.0
-    yaw: float = 0.0
-    yaw_rate: float = 0.0
-    vx: float = 1.0
-    vy: float = 0.0
-    sideslip: float = 0.0
-
-
 def test_the_streams_are_the_errors_the_bench_gave_the_controllers():
     sensors = Sensors(NOISE, DT, seed=3)
-    seen = [sensors.measure(_Out()) for _ in range(300)]
+    seen = [sensors.measure(plant_output()) for _ in range(300)]
     e = ff.streams(NOISE, 3, 300, DT)
     assert e["y"] == pytest.approx([s.y for s in seen], abs=0.0)
     with_vy = {**NOISE, "vy": NoiseSpec(0.035, 1.0)}
     sensors = Sensors(with_vy, DT, seed=3)
-    seen_vy = [sensors.measure(_Out()).vy for _ in range(300)]
+    seen_vy = [sensors.measure(plant_output()).vy for _ in range(300)]
     assert ff.streams(with_vy, 3, 300, DT)["vy"] == pytest.approx(seen_vy, abs=0.0)
     assert e["yaw"] == pytest.approx([s.yaw for s in seen], abs=0.0)
     assert e["yaw_rate"] == pytest.approx([s.yaw_rate for s in seen], abs=0.0)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from plant_helpers import plant_output
 
 from fourws_bringup.core.conditions import (
     condition_from_mapping,
@@ -165,12 +166,8 @@ def test_the_filters_covariance_is_its_error():
 
 
 def _seen(**fields) -> PlantOutputs:
-    """A plant output with a plausible default for every field, ``fields`` replacing some."""
-    base = dict(t_s=0.0, x=1.0, y=2.0, yaw=0.1, vx=10.0, vy=0.0, yaw_rate=0.0, ax=0.0, ay=0.0,
-                sideslip=0.0, steer_front=0.0, steer_rear=0.0)
-    arrays = {name: np.ones(4) for name in ("wheel_speed", "wheel_torque", "fx", "fy", "fz",
-                                            "mu")}
-    return PlantOutputs(**(base | arrays | fields))
+    """A plant output off the origin, moving at 10 m/s; ``fields`` replace any field."""
+    return plant_output(**({"x": 1.0, "y": 2.0, "yaw": 0.1, "vx": 10.0} | fields))
 
 
 def test_a_non_finite_measurement_is_refused_and_the_filter_starts_again():
