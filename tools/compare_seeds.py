@@ -9,10 +9,10 @@ For every scenario and every other controller: the median and worst of the metri
 paired by seed against the reference (with ``--between BASE OTHER``: each controller under
 condition OTHER against itself under BASE), the median difference, how many seeds the
 controller is better (smaller) on, the two-sided Wilcoxon signed-rank p (scipy; no
-normality assumed) and the mean paired difference with its 95 % confidence interval (Student t: how
-much better or worse the data allow, not only whether they differ). Markdown on stdout. Only
-completed runs of seeds both controllers have are paired;
-a seed with a run that did not complete is counted as lost for that controller.
+normality assumed) and the mean paired difference with its 95 % confidence interval
+(Student t: how much better or worse the data allow, not only whether they differ).
+Markdown on stdout. Only completed runs of seeds both controllers have are paired; a seed
+with a run that did not complete is counted as lost for that controller.
 
 With ``--margin M`` (in the metric's unit, declared before the data are seen): a
 non-inferiority test, H0 "the controller is worse by M or more" (mean paired difference

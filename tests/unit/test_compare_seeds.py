@@ -16,13 +16,16 @@ spec.loader.exec_module(cs)
 
 
 def _write(tmp_path, values):
+    """A results.csv of ``values``: (controller, seed[, condition]) -> metric (None: the run
+    did not complete); the condition is "all" where the key leaves it out."""
     path = tmp_path / "results.csv"
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, ["controller", "scenario", "condition", "seed", "completed",
                                "max_abs_lateral_error_m"])
         w.writeheader()
-        for (c, seed), v in values.items():
-            w.writerow({"controller": c, "scenario": "/x/s.yaml", "condition": "all",
+        for (c, seed, *cond), v in values.items():
+            w.writerow({"controller": c, "scenario": "/x/s.yaml",
+                        "condition": cond[0] if cond else "all",
                         "seed": seed, "completed": str(v is not None),
                         "max_abs_lateral_error_m": "" if v is None else v})
     return path
@@ -80,19 +83,12 @@ def test_non_inferiority_is_shown_only_when_the_interval_lies_below_the_margin(t
 def test_between_pairs_each_controller_with_itself_under_the_other_condition(tmp_path):
     """``--between BASE OTHER``: a controller's seeds under OTHER against its own under BASE;
     a controller missing from one condition is left out, and none in common is an error."""
-    path = tmp_path / "results.csv"
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, ["controller", "scenario", "condition", "seed", "completed",
-                               "max_abs_lateral_error_m"])
-        w.writeheader()
-        for s in range(8):
-            for cond, shift in (("base", 0.0), ("retuned", 0.003)):
-                w.writerow({"controller": "a", "scenario": "/x/s.yaml", "condition": cond,
-                            "seed": s, "completed": "True",
-                            "max_abs_lateral_error_m": 0.05 + 0.001 * s + shift
-                            + 0.0002 * (s % 2)})
-            w.writerow({"controller": "b", "scenario": "/x/s.yaml", "condition": "base",
-                        "seed": s, "completed": "True", "max_abs_lateral_error_m": 0.01})
+    vals = {}
+    for s in range(8):
+        for cond, shift in (("base", 0.0), ("retuned", 0.003)):
+            vals[("a", s, cond)] = 0.05 + 0.001 * s + shift + 0.0002 * (s % 2)
+        vals[("b", s, "base")] = 0.01
+    path = _write(tmp_path, vals)
     base, other = (cs.read_rows(path, "max_abs_lateral_error_m", c)
                    for c in ("base", "retuned"))
     (r,) = cs.compare_conditions(base, other, "base", "retuned")
