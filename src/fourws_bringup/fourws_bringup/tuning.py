@@ -31,10 +31,11 @@ shipped YAML; the report (``--report``) lists every candidate's ρ and score.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -132,22 +133,32 @@ def _digits(x: float) -> int:
     return max(DIGITS - 1 - int(math.floor(math.log10(abs(x)))), 0) if x else DIGITS
 
 
-def worst_radius(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> float:
-    """Step 2: the largest ρ over the group's controllers, speeds and worlds."""
+def loops(spec: TuningSpec, group: Group, cand: Mapping[str, float]
+          ) -> Iterator[tuple[str, str, float, Callable[..., Any]]]:
+    """Step 2's linearised loops of a candidate: (controller, world, speed km/h, analyse),
+    where ``analyse(fn)`` calls ``core.margins.margins`` or ``spectral_radius`` on that loop
+    (the controller told of the world's delays, the plant given them)."""
     from fourws_sim.core.scenario import load_scenario
 
-    from .core.margins import spectral_radius
-
     vehicle = load_scenario(spec.margin_scenario).vehicle
-    worst = 0.0
     for c in group.controllers:
-        for n_d, dead in spec.worlds.values():
+        for world, (n_d, dead) in spec.worlds.items():
             cfg = load_mpc_config(c, {**cand, "input_delay_periods": n_d,
                                       "steer_dead_time_s": dead})
             for v in spec.speeds_kmh:
-                worst = max(worst, spectral_radius(cfg, vehicle, v / 3.6, delay_periods=n_d,
-                                                   steer_dead_time_s=dead))
-    return worst
+                yield c, world, v, functools.partial(_analyse, cfg, vehicle, v / 3.6, n_d, dead)
+
+
+def _analyse(cfg: MpcConfig, vehicle: Any, vx: float, n_d: int, dead: float,
+             fn: Callable[..., Any]) -> Any:
+    return fn(cfg, vehicle, vx, delay_periods=n_d, steer_dead_time_s=dead)
+
+
+def worst_radius(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> float:
+    """Step 2: the largest ρ over the group's controllers, speeds and worlds."""
+    from .core.margins import spectral_radius
+
+    return max(analyse(spectral_radius) for *_, analyse in loops(spec, group, cand))
 
 
 def _radius_job(args: tuple[TuningSpec, Group, dict[str, float]]) -> float:
