@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import sys
 import traceback
 from collections.abc import Mapping
@@ -77,8 +78,8 @@ def load_spec(path: str | Path) -> list[Job]:
     """The jobs of a spec file, in a fixed order; ``ValueError`` naming a bad key.
 
     Instead of one product, ``groups: [{controllers, scenarios, conditions}, ...]`` gives
-    several (shared ``seeds``); a scenario given as a relative ``.yaml`` path is relative to
-    the spec's folder."""
+    several (shared ``seeds``); a scenario or controller preset given as a relative ``.yaml``
+    path is relative to the spec's folder (:func:`beside`)."""
     path = Path(path)
     data = read_yaml_file(path)
     if not isinstance(data, Mapping):
@@ -97,10 +98,18 @@ def load_spec(path: str | Path) -> list[Job]:
         for key in sorted(GROUP_KEYS):
             if not g.get(key):
                 raise ValueError(f"{where}: '{key}' is missing or empty")
-        scenarios = [str(path.parent / s) if str(s).endswith((".yaml", ".yml"))
-                     and not Path(s).is_absolute() else str(s) for s in g["scenarios"]]
-        jobs += _product(g["controllers"], scenarios, g["conditions"], seeds)
+        jobs += _product([beside(path, c) for c in g["controllers"]],
+                         [beside(path, s) for s in g["scenarios"]], g["conditions"], seeds)
     return jobs
+
+
+def beside(spec_path: Path, entry: Any) -> str:
+    """A spec's scenario or controller entry: a relative ``.yaml`` path is relative to the
+    spec's folder; a name (or an absolute path) is kept as it is."""
+    s = str(entry)
+    if s.endswith((".yaml", ".yml")) and not Path(s).is_absolute():
+        return os.path.normpath(Path(spec_path).parent / s)
+    return s
 
 
 def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> list[Job]:

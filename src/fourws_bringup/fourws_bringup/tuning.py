@@ -84,8 +84,9 @@ class TuningSpec:
 
 
 def load_tuning_spec(path: str | Path) -> TuningSpec:
-    """The spec; ``ValueError`` naming what is wrong. Relative ``.yaml`` scenarios are
-    relative to the spec's folder."""
+    """The spec; ``ValueError`` naming what is wrong. A relative ``.yaml`` scenario or
+    controller preset is relative to the spec's folder (``sweep.beside``); a preset given as a
+    file is written in place (:func:`write_presets`)."""
     path = Path(path)
     d = read_yaml_file(path)
     if not isinstance(d, Mapping):
@@ -97,15 +98,17 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     worlds = {str(k): (int(v.get("delay_periods", 0)),
                        float(v.get("steer_dead_time_ms", 0.0)) * 1e-3)
               for k, v in m["worlds"].items()}
+    from .sweep import beside
+
     known = {f.name for f in dataclasses.fields(MpcConfig)}
     groups = []
     for name, g in d["groups"].items():
         params = tuple(str(p) for p in g["parameters"])
         if len(params) != 2 or not set(params) <= known:
             raise ValueError(f"{path}: group {name}: two MPC parameters, got {list(params)}")
-        groups.append(Group(str(name), tuple(str(c) for c in g["controllers"]), params))
-    scen = tuple(str(path.parent / s) if str(s).endswith(".yaml") else str(s)
-                 for s in d["scenarios"])
+        groups.append(Group(str(name), tuple(beside(path, c) for c in g["controllers"]),
+                            params))
+    scen = tuple(beside(path, s) for s in d["scenarios"])
     return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
                       float(d["max_spectral_radius"]),
                       tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]), worlds,
@@ -281,12 +284,12 @@ def presets_dir(spec_path: str | Path) -> Path:
 
 def write_presets(spec: TuningSpec, chosen: Mapping[str, Mapping[str, float]],
                   directory: Path, check: bool = False) -> list[str]:
-    """Write (or with ``check`` compare) each preset's tuned block in ``directory``; the
-    presets that differ."""
+    """Write (or with ``check`` compare) each preset's tuned block in ``directory`` (a preset
+    the spec gives as a file: in that file); the presets that differ."""
     differ = []
     for group in spec.groups:
         for c in group.controllers:
-            path = directory / f"{c}.yaml"
+            path = Path(c) if c.endswith((".yaml", ".yml")) else directory / f"{c}.yaml"
             if not path.is_file():
                 raise ValueError(f"preset {c}: {path} not found")
             text = path.read_text(encoding="utf-8")
