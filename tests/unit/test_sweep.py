@@ -91,6 +91,22 @@ def test_groups_and_scenario_paths_relative_to_the_spec(tmp_path):
         load_spec(p)
 
 
+def test_a_controller_preset_file_is_relative_to_the_spec_like_a_scenario(tmp_path):
+    """The one rule (sweep.beside): a relative .yaml entry is beside the spec (``..``
+    resolved), a preset name or an absolute path stays as written."""
+    from fourws_bringup.sweep import beside
+
+    (tmp_path / "study").mkdir()
+    p = tmp_path / "study" / "spec.yaml"
+    p.write_text("controllers: [mine.yaml, lqr_ff, /abs/other.yaml]\n"
+                 "scenarios: [../sc/x.yaml]\nconditions: {a: {}}\n", encoding="utf-8")
+    jobs = load_spec(p)
+    assert [j.controller for j in jobs] == [str(tmp_path / "study" / "mine.yaml"), "lqr_ff",
+                                            "/abs/other.yaml"]
+    assert {j.scenario for j in jobs} == {str(tmp_path / "sc" / "x.yaml")}
+    assert beside(p, "dlc_60_mu05") == "dlc_60_mu05"
+
+
 def test_the_shipped_benchmark_spec_loads_and_covers_the_issue():
     from pathlib import Path
 

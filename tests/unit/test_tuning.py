@@ -60,10 +60,40 @@ def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
         tuning.replace_block("allocator_node: {}\n", [])
 
 
-def test_the_shipped_presets_carry_the_chosen_values_and_satisfy_the_margin():
+def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
+    """A study's presets live beside its spec, not among the package's: the spec names the
+    file (relative to itself), ``write_presets`` writes that file and no other."""
+    shipped_np30 = ROOT / "src" / "fourws_bringup" / "config" / "controllers" / \
+        "improved_np30.yaml"
+    (tmp_path / "mine.yaml").write_text(shipped_np30.read_text(encoding="utf-8"),
+                                        encoding="utf-8")
+    text = SPEC.read_text(encoding="utf-8")
+    text = text[:text.index("groups:")] + (
+        "groups:\n  mine:\n    controllers: [mine.yaml]\n"
+        "    parameters: [scale_y_m, scale_phi_deg]\n")
+    (tmp_path / "tuning.yaml").write_text(text, encoding="utf-8")
+    spec = tuning.load_tuning_spec(tmp_path / "tuning.yaml")
+    assert spec.groups[0].controllers == (str(tmp_path / "mine.yaml"),)
+    values = {"scale_y_m": 0.0236, "scale_phi_deg": 0.6}
+    elsewhere = tmp_path / "package"
+    elsewhere.mkdir()
+    assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == \
+        [str(tmp_path / "mine.yaml")]                      # differs, --check writes nothing
+    assert tuning.write_presets(spec, {"mine": values}, elsewhere) == \
+        [str(tmp_path / "mine.yaml")]
+    cfg = load_mpc_config(str(tmp_path / "mine.yaml"))
+    assert (cfg.scale_y_m, cfg.scale_phi_deg, cfg.np_baseline) == (0.0236, 0.6, 30)
+    assert not list(elsewhere.iterdir())
+    assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == []
+
+
+@pytest.mark.parametrize("spec_path", [SPEC, ROOT / "benchmarks" / "horizon_study" /
+                                       "tuning.yaml"], ids=["shipped", "horizon_study"])
+def test_the_presets_carry_the_chosen_values_and_satisfy_the_margin(spec_path):
     """What the presets load is what their tuned block says, and the chosen candidate meets
-    the procedure's own constraint (the full rerun is the next test)."""
-    spec = tuning.load_tuning_spec(SPEC)
+    the procedure's own constraint (the full rerun of the shipped spec is the next test; the
+    horizon study's presets, which live beside their spec, are held to the same)."""
+    spec = tuning.load_tuning_spec(spec_path)
     for g in spec.groups:
         vals = {}
         for c in g.controllers:
