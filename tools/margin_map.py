@@ -12,7 +12,8 @@ very loops step 2 analyses (``fourws_bringup.tuning.loops``: every controller of
 every speed and world of the spec, the delays told to the controller), the largest ρ and the
 smallest GM, PM and DM (``core.margins``), and the controller that sets the smallest GM.
 A stable loop without a phase crossover above 0 dB has GM ∞ (likewise PM without a gain
-crossover); a loop with ρ ≥ 1 has no margin and fails the floor. Markdown on stdout or
+crossover); a loop with ρ ≥ 1 has no margin and fails the floor. ("shipped": the values
+the group's presets hold now, ``tuning.shipped``.) Markdown on stdout or
 ``--out``.
 """
 
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fourws_bringup import tuning
+from fourws_bringup.core.configs import preset_label
 from fourws_bringup.core.margins import margins
 
 
@@ -39,7 +41,7 @@ class CandidateMargins:
     gain_margin_db: float
     phase_margin_deg: float
     delay_margin_ms: float
-    binding: str             # the controller (world, speed) with the smallest GM
+    binding: str             # the loop with the smallest finite GM ("" if none is finite)
     by_controller: Mapping[str, tuple[float, float]]   # controller -> its smallest GM, PM
 
     def meets(self, max_rho: float, min_gm_db: float, min_pm_deg: float) -> bool:
@@ -63,8 +65,8 @@ def candidate_margins(spec: tuning.TuningSpec, group: tuning.Group,
         r = m.spectral_radius
         rho = max(rho, r)
         g = _figure(m.gain_margin_db, r)
-        if g < gm or not binding:
-            gm, binding = min(gm, g), f"{c} ({world}, {v:g} km/h)"
+        if g < gm:
+            gm, binding = g, f"{c} ({world}, {v:g} km/h)"
         p = _figure(m.phase_margin_deg, r)
         pm = min(pm, p)
         g0, p0 = own.get(c, (math.inf, math.inf))
@@ -113,30 +115,29 @@ def markdown(spec_path: str, spec: tuning.TuningSpec,
     for g in spec.groups:
         rows = table[g.name]
         now = tuning.shipped(g)
-        kept = [r for r in rows if r.rho <= spec.max_spectral_radius]
-        floor = [r for r in rows if r.meets(spec.max_spectral_radius, min_gm_db, min_pm_deg)]
-        best_gm = max((r.gain_margin_db for r in kept), default=-math.inf)
-        best_pm = max((r.phase_margin_deg for r in kept), default=-math.inf)
-        out += [f"## {g.name} ({', '.join(g.controllers)})", "",
-                f"{len(kept)} of {len(rows)} candidates kept, {len(floor)} meet the floor; "
-                f"the kept candidates reach at most GM {_num(best_gm, '.1f')} dB and PM "
-                f"{_num(best_pm, '.1f')}°."]
-        if len(g.controllers) > 1:
+        kept = [r.rho <= spec.max_spectral_radius for r in rows]
+        floor = [r.meets(spec.max_spectral_radius, min_gm_db, min_pm_deg) for r in rows]
+        ok = [r for r, k in zip(rows, kept, strict=True) if k]
+        out += [f"## {g.name} ({', '.join(preset_label(c) for c in g.controllers)})", "",
+                f"{sum(kept)} of {len(rows)} candidates kept, {sum(floor)} meet the floor"
+                + (f"; the kept candidates reach at most GM "
+                   f"{_num(max(r.gain_margin_db for r in ok), '.1f')} dB and PM "
+                   f"{_num(max(r.phase_margin_deg for r in ok), '.1f')}°." if ok else ".")]
+        if len(g.controllers) > 1 and ok:
             out.append("Each controller alone, over the kept candidates, at most: " + "; ".join(
-                f"{c} GM {_num(max(r.by_controller[c][0] for r in kept), '.1f')} dB, PM "
-                f"{_num(max(r.by_controller[c][1] for r in kept), '.1f')}°"
+                f"{preset_label(c)} GM {_num(max(r.by_controller[c][0] for r in ok), '.1f')}"
+                f" dB, PM {_num(max(r.by_controller[c][1] for r in ok), '.1f')}°"
                 for c in g.controllers) + ".")
         out += ["",
                 "| " + " | ".join(g.parameters) + " | ρ | GM dB | PM ° | DM ms | smallest GM "
                 "at | kept | floor |",
                 "|" + "---|" * (len(g.parameters) + 7)]
-        for r in rows:
+        for r, k, f in zip(rows, kept, floor, strict=True):
             mark = " (shipped)" if dict(r.values) == now else ""
             out.append("| " + " | ".join(f"{r.values[p]:g}" for p in g.parameters)
                        + f"{mark} | {r.rho:.4f} | {_num(r.gain_margin_db, '.2f')} | "
                        f"{_num(r.phase_margin_deg, '.1f')} | {_num(r.delay_margin_ms, '.1f')} | "
-                       f"{r.binding} | {'yes' if r in kept else ''} | "
-                       f"{'yes' if r in floor else ''} |")
+                       f"{r.binding or '—'} | {'yes' if k else ''} | {'yes' if f else ''} |")
         out.append("")
     return "\n".join(out)
 

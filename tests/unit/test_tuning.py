@@ -1,6 +1,7 @@
 """fourws tune: the one tuning procedure, its spec, its preset blocks, and that rerunning it
 reproduces the shipped presets."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -46,6 +47,10 @@ def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
         "[scale_y_m, scale_phi_deg]", "[scale_y_m, no_such_parameter]"), encoding="utf-8")
     with pytest.raises(ValueError, match="no_such_parameter"):
         tuning.load_tuning_spec(bad)
+    bad.write_text(SPEC.read_text(encoding="utf-8").replace("speeds_kmh: [60.0, 90.0]",
+                                                            "speeds_kmh: []"), encoding="utf-8")
+    with pytest.raises(ValueError, match="speeds_kmh"):   # no loop: no candidate is checked
+        tuning.load_tuning_spec(bad)
 
 
 def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
@@ -58,6 +63,15 @@ def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
     assert twice == once.replace("0.01", "0.02")
     with pytest.raises(ValueError, match="mpc_node"):
         tuning.replace_block("allocator_node: {}\n", [])
+
+
+def test_the_horizon_study_tunes_by_the_shipped_procedure():
+    """benchmarks/horizon_study/tuning.yaml says it is the shipped spec with other groups: the
+    same grid, margin constraint, scenarios, seeds and conditions."""
+    study = tuning.load_tuning_spec(ROOT / "benchmarks" / "horizon_study" / "tuning.yaml")
+    shipped = tuning.load_tuning_spec(SPEC)
+    assert dataclasses.replace(study, groups=shipped.groups) == shipped
+    assert {g.name for g in study.groups}.isdisjoint(g.name for g in shipped.groups)
 
 
 def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):

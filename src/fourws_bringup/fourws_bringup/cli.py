@@ -352,9 +352,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "presets differ from the procedure's choice")
     t.add_argument("--report", default=None, help="write every candidate's rho and score "
                    "(Markdown) here")
-    t.add_argument("--presets", default=None, help="presets folder to write or check "
-                   "(default: the checkout's src/fourws_bringup/config/controllers beside "
-                   "the spec, else the installed presets)")
+    t.add_argument("--presets", default=None, help="presets folder to write or check for "
+                   "the presets the spec names (default: the checkout's "
+                   "src/fourws_bringup/config/controllers beside the spec, else the installed "
+                   "presets); a preset the spec gives as a .yaml file is written in place")
     t.set_defaults(func=_cmd_tune)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(

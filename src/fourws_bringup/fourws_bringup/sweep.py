@@ -13,7 +13,7 @@ put back in job order, so the CSV is the same as a local sweep's.
 
 Spec (YAML)::
 
-    controllers: [improved, lqr_ff]          # preset names or YAML paths
+    controllers: [improved, lqr_ff]          # preset names or YAML paths (beside the spec)
     scenarios: [dlc_60_mu05, dlc_90_mu06]
     seeds: [0, 1, 2, 3, 4]                   # used by conditions with noise; others run once
     conditions:                              # name -> condition (core.conditions)
@@ -54,6 +54,7 @@ from .core.conditions import (
     condition_mapping,
     node_parameters,
 )
+from .core.configs import is_yaml_path
 
 SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
 GROUP_KEYS = {"controllers", "scenarios", "conditions"}
@@ -105,9 +106,11 @@ def load_spec(path: str | Path) -> list[Job]:
 
 def beside(spec_path: Path, entry: Any) -> str:
     """A spec's scenario or controller entry: a relative ``.yaml`` path is relative to the
-    spec's folder; a name (or an absolute path) is kept as it is."""
+    spec's folder (``..`` collapsed as text: a spec folder reached through a symlink is
+    taken as written); a name (or an absolute path) is kept as it is."""
+
     s = str(entry)
-    if s.endswith((".yaml", ".yml")) and not Path(s).is_absolute():
+    if is_yaml_path(s) and not Path(s).is_absolute():
         return os.path.normpath(Path(spec_path).parent / s)
     return s
 

@@ -47,11 +47,14 @@ from .core.conditions import condition_from_mapping, condition_mapping
 from .core.configs import (
     controller_preset_path,
     controllers_dir,
+    is_yaml_path,
     load_mpc_config,
     node_values,
+    preset_label,
 )
 
-BEGIN = "# -- tuned: fourws tune benchmarks/tuning.yaml writes the lines below; do not edit --"
+BEGIN = ("# -- tuned: fourws tune (its spec names this preset) writes the lines below; "
+         "do not edit --")
 END = "# -- end tuned --"
 SPEC_KEYS = {"grid_exponents", "max_spectral_radius", "margin", "scenarios", "seeds",
              "conditions", "groups"}
@@ -95,6 +98,8 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     if missing or unknown:
         raise ValueError(f"{path}: missing {missing}, unknown {unknown}")
     m = d["margin"]
+    if not m.get("speeds_kmh") or not m.get("worlds"):
+        raise ValueError(f"{path}: margin needs at least one of speeds_kmh and of worlds")
     worlds = {str(k): (int(v.get("delay_periods", 0)),
                        float(v.get("steer_dead_time_ms", 0.0)) * 1e-3)
               for k, v in m["worlds"].items()}
@@ -138,7 +143,7 @@ def _digits(x: float) -> int:
 
 def loops(spec: TuningSpec, group: Group, cand: Mapping[str, float]
           ) -> Iterator[tuple[str, str, float, Callable[..., Any]]]:
-    """Step 2's linearised loops of a candidate: (controller, world, speed km/h, analyse),
+    """Step 2's linearised loops of a candidate: (controller, world, v_kmh, analyse),
     where ``analyse(fn)`` calls ``core.margins.margins`` or ``spectral_radius`` on that loop
     (the controller told of the world's delays, the plant given them)."""
     from fourws_sim.core.scenario import load_scenario
@@ -148,13 +153,14 @@ def loops(spec: TuningSpec, group: Group, cand: Mapping[str, float]
         for world, (n_d, dead) in spec.worlds.items():
             cfg = load_mpc_config(c, {**cand, "input_delay_periods": n_d,
                                       "steer_dead_time_s": dead})
-            for v in spec.speeds_kmh:
-                yield c, world, v, functools.partial(_analyse, cfg, vehicle, v / 3.6, n_d, dead)
+            for v_kmh in spec.speeds_kmh:
+                yield c, world, v_kmh, functools.partial(_analyse, cfg, vehicle, v_kmh / 3.6,
+                                                         n_d, dead)
 
 
-def _analyse(cfg: MpcConfig, vehicle: Any, vx: float, n_d: int, dead: float,
-             fn: Callable[..., Any]) -> Any:
-    return fn(cfg, vehicle, vx, delay_periods=n_d, steer_dead_time_s=dead)
+def _analyse(cfg: MpcConfig, vehicle: Any, vx_mps: float, delay_periods: int,
+             dead_time_s: float, fn: Callable[..., Any]) -> Any:
+    return fn(cfg, vehicle, vx_mps, delay_periods=delay_periods, steer_dead_time_s=dead_time_s)
 
 
 def worst_radius(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> float:
@@ -255,7 +261,7 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
                 rows[k] = {"group": group.name, **c, "worst_rho": round(r, 5),
                            "runs": done, "score_m": score if complete else None,
                            "pruned_above_m": None if complete else score,
-                           **{f"max_ey_{n}": v for n, v in by_ctrl.items()}}
+                           **{f"max_ey_{preset_label(n)}": v for n, v in by_ctrl.items()}}
                 if progress:
                     print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
                           + (f"score {score:.4f} m" if complete else
@@ -289,7 +295,7 @@ def write_presets(spec: TuningSpec, chosen: Mapping[str, Mapping[str, float]],
     differ = []
     for group in spec.groups:
         for c in group.controllers:
-            path = Path(c) if c.endswith((".yaml", ".yml")) else directory / f"{c}.yaml"
+            path = Path(c) if is_yaml_path(c) else directory / f"{c}.yaml"
             if not path.is_file():
                 raise ValueError(f"preset {c}: {path} not found")
             text = path.read_text(encoding="utf-8")

@@ -47,11 +47,22 @@ def list_controllers() -> list[str]:
     return sorted(p.stem for p in controllers_dir().glob("*.yaml"))
 
 
+def is_yaml_path(entry: str) -> bool:
+    """Whether a spec's or a command's scenario or controller entry names a file (``.yaml``,
+    ``.yml``) rather than a shipped name: the one rule."""
+    return str(entry).endswith((".yaml", ".yml"))
+
+
+def preset_label(entry: str) -> str:
+    """A controller entry as reports name it: a preset file by its stem, a name as it is."""
+    return Path(entry).stem if is_yaml_path(entry) else str(entry)
+
+
 def controller_preset_path(name_or_path: str) -> Path:
     """``controllers/<name>.yaml`` of fourws_bringup, or the given file; ``ValueError``
     naming the known presets otherwise."""
     p = Path(name_or_path)
-    if name_or_path.endswith((".yaml", ".yml")) or p.is_file():
+    if is_yaml_path(name_or_path) or p.is_file():
         if not p.is_file():
             raise ValueError(f"controller preset file not found: {p}")
         return p
