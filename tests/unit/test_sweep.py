@@ -92,9 +92,9 @@ def test_groups_and_scenario_paths_relative_to_the_spec(tmp_path):
 
 
 def test_a_controller_preset_file_is_relative_to_the_spec_like_a_scenario(tmp_path):
-    """The one rule (sweep.beside): a relative .yaml entry is beside the spec (``..``
+    """The one rule (core.configs.beside): a relative .yaml entry is beside the spec (``..``
     resolved), a preset name or an absolute path stays as written."""
-    from fourws_bringup.sweep import beside
+    from fourws_bringup.core.configs import beside
 
     (tmp_path / "study").mkdir()
     p = tmp_path / "study" / "spec.yaml"

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import sys
 import traceback
 from collections.abc import Mapping
@@ -54,7 +53,7 @@ from .core.conditions import (
     condition_mapping,
     node_parameters,
 )
-from .core.configs import is_yaml_path
+from .core.configs import beside
 
 SPEC_KEYS = {"controllers", "scenarios", "seeds", "conditions"}
 GROUP_KEYS = {"controllers", "scenarios", "conditions"}
@@ -80,7 +79,7 @@ def load_spec(path: str | Path) -> list[Job]:
 
     Instead of one product, ``groups: [{controllers, scenarios, conditions}, ...]`` gives
     several (shared ``seeds``); a scenario or controller preset given as a relative ``.yaml``
-    path is relative to the spec's folder (:func:`beside`)."""
+    path is relative to the spec's folder (``core.configs.beside``)."""
     path = Path(path)
     data = read_yaml_file(path)
     if not isinstance(data, Mapping):
@@ -102,17 +101,6 @@ def load_spec(path: str | Path) -> list[Job]:
         jobs += _product([beside(path, c) for c in g["controllers"]],
                          [beside(path, s) for s in g["scenarios"]], g["conditions"], seeds)
     return jobs
-
-
-def beside(spec_path: Path, entry: Any) -> str:
-    """A spec's scenario or controller entry: a relative ``.yaml`` path is relative to the
-    spec's folder (``..`` collapsed as text: a spec folder reached through a symlink is
-    taken as written); a name (or an absolute path) is kept as it is."""
-
-    s = str(entry)
-    if is_yaml_path(s) and not Path(s).is_absolute():
-        return os.path.normpath(Path(spec_path).parent / s)
-    return s
 
 
 def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> list[Job]:

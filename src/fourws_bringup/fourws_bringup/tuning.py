@@ -45,6 +45,7 @@ from fourws_mpc.core.config import MpcConfig
 
 from .core.conditions import condition_from_mapping, condition_mapping
 from .core.configs import (
+    beside,
     controller_preset_path,
     controllers_dir,
     is_yaml_path,
@@ -88,8 +89,8 @@ class TuningSpec:
 
 def load_tuning_spec(path: str | Path) -> TuningSpec:
     """The spec; ``ValueError`` naming what is wrong. A relative ``.yaml`` scenario or
-    controller preset is relative to the spec's folder (``sweep.beside``); a preset given as a
-    file is written in place (:func:`write_presets`)."""
+    controller preset is relative to the spec's folder (``core.configs.beside``); a preset
+    given as a file is written in place (:func:`write_presets`)."""
     path = Path(path)
     d = read_yaml_file(path)
     if not isinstance(d, Mapping):
@@ -103,8 +104,6 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     worlds = {str(k): (int(v.get("delay_periods", 0)),
                        float(v.get("steer_dead_time_ms", 0.0)) * 1e-3)
               for k, v in m["worlds"].items()}
-    from .sweep import beside
-
     known = {f.name for f in dataclasses.fields(MpcConfig)}
     groups = []
     for name, g in d["groups"].items():

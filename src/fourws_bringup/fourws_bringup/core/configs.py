@@ -13,6 +13,7 @@ differently.
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +52,16 @@ def is_yaml_path(entry: str) -> bool:
     """Whether a spec's or a command's scenario or controller entry names a file (``.yaml``,
     ``.yml``) rather than a shipped name: the one rule."""
     return str(entry).endswith((".yaml", ".yml"))
+
+
+def beside(spec_path: str | Path, entry: Any) -> str:
+    """A spec's scenario or controller entry: a relative ``.yaml`` path is relative to the
+    spec's folder (``..`` collapsed as text: a spec folder reached through a symlink is
+    taken as written); a name (or an absolute path) is kept as it is."""
+    s = str(entry)
+    if is_yaml_path(s) and not Path(s).is_absolute():
+        return os.path.normpath(Path(spec_path).parent / s)
+    return s
 
 
 def preset_label(entry: str) -> str:
