@@ -11,6 +11,9 @@ from fourws_bringup.core.configs import load_mpc_config, node_values
 
 ROOT = Path(__file__).resolve().parents[2]
 SPEC = ROOT / "benchmarks" / "tuning.yaml"
+# studies that tune their own presets by the shipped procedure (each spec says so)
+STUDIES = {name: ROOT / "benchmarks" / name / "tuning.yaml"
+           for name in ("horizon_study", "own_scaling_study")}
 
 
 def test_the_spec_is_disjoint_from_what_is_reported():
@@ -65,10 +68,11 @@ def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
         tuning.replace_block("allocator_node: {}\n", [])
 
 
-def test_the_horizon_study_tunes_by_the_shipped_procedure():
-    """benchmarks/horizon_study/tuning.yaml says it is the shipped spec with other groups: the
-    same grid, margin constraint, scenarios, seeds and conditions."""
-    study = tuning.load_tuning_spec(ROOT / "benchmarks" / "horizon_study" / "tuning.yaml")
+@pytest.mark.parametrize("study_path", STUDIES.values(), ids=STUDIES.keys())
+def test_a_study_tunes_by_the_shipped_procedure(study_path):
+    """A study's tuning spec says it is the shipped spec with other groups: the same grid,
+    margin constraint, scenarios, seeds and conditions."""
+    study = tuning.load_tuning_spec(study_path)
     shipped = tuning.load_tuning_spec(SPEC)
     assert dataclasses.replace(study, groups=shipped.groups) == shipped
     assert {g.name for g in study.groups}.isdisjoint(g.name for g in shipped.groups)
@@ -101,12 +105,12 @@ def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
     assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == []
 
 
-@pytest.mark.parametrize("spec_path", [SPEC, ROOT / "benchmarks" / "horizon_study" /
-                                       "tuning.yaml"], ids=["shipped", "horizon_study"])
+@pytest.mark.parametrize("spec_path", [SPEC, *STUDIES.values()],
+                         ids=["shipped", *STUDIES.keys()])
 def test_the_presets_carry_the_chosen_values_and_satisfy_the_margin(spec_path):
     """What the presets load is what their tuned block says, and the chosen candidate meets
     the procedure's own constraint (the full rerun of the shipped spec is the next test; the
-    horizon study's presets, which live beside their spec, are held to the same)."""
+    studies' presets, which live beside their specs, are held to the same)."""
     spec = tuning.load_tuning_spec(spec_path)
     for g in spec.groups:
         vals = {}
