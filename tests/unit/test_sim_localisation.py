@@ -261,3 +261,24 @@ def test_a_failed_update_restarts_the_filter_from_the_fix():
     s = f.update((0.1, 0.2, 0.01), (10.0, 0.0, 0.0))
     assert f.restarts == 1 and np.all(np.isfinite(s))
     np.testing.assert_allclose(s[:3], [0.1, 0.2, 0.01])
+
+
+
+def test_a_filter_started_with_the_run_is_converged_within_its_first_seconds():
+    """The filter starts with each run (a car's has run long before a manoeuvre). That costs
+    nothing measurable: the fix's error can be told from dead reckoning for about one
+    correlation time (v_y's error drifts the odometry), so its gain settles within about a
+    second. Its lateral error over a run's first 5 s is that of the rest of the run (10-35 s;
+    12 seeds pooled: 18.4 against 19.0 mm RMS; a pre-run of 30 s on the errors' past, tried
+    on 30 seeds and not kept, gave 18.5 against a cold start's 18.8), below the raw fix's
+    (20.2 mm)."""
+    noise = _realistic_noise()
+    first, late, raw = [], [], []
+    for seed in range(12):
+        _, est, errs = _straight(noise, seed, 3500, 60.0 / 3.6)
+        first.append(est[:500, Pose.Y])
+        late.append(est[1000:, Pose.Y])
+        raw.append([e["y"] for e in errs[:500]])
+    rms = lambda a: float(np.sqrt(np.mean(np.square(a))))  # noqa: E731
+    assert 0.85 < rms(first) / rms(late) < 1.15, (rms(first), rms(late))
+    assert rms(first) < rms(raw)
