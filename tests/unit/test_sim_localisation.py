@@ -263,7 +263,6 @@ def test_a_failed_update_restarts_the_filter_from_the_fix():
     np.testing.assert_allclose(s[:3], [0.1, 0.2, 0.01])
 
 
-
 def test_a_filter_started_with_the_run_is_converged_within_its_first_seconds():
     """The filter starts with each run (a car's has run long before a manoeuvre). That costs
     nothing measurable: the fix's error can be told from dead reckoning for about one
