@@ -4,6 +4,8 @@
     python tools/compare_seeds.py runs/lqr-comparison/results.csv --reference lqr_ff
         [--metric max_abs_lateral_error_m] [--condition all]
     python tools/compare_seeds.py RESULTS --between all_ekf all_ekf_retuned
+    python tools/compare_seeds.py RESULTS --condition sY_x4 --reference lqr_ff \
+        --reference-condition all
 
 For every scenario and every other controller: the median and worst of the metric, and,
 paired by seed against the reference (with ``--between BASE OTHER``: each controller under
@@ -13,6 +15,10 @@ normality assumed) and the mean paired difference with its 95 % confidence inter
 (Student t: how much better or worse the data allow, not only whether they differ).
 Markdown on stdout. Only completed runs of seeds both controllers have are paired; a seed
 with a run that did not complete is counted as lost for that controller.
+
+With ``--reference-condition REF_COND`` the reference's runs come from condition REF_COND
+and the other controllers' from ``--condition`` (a diagnostic that varies a controller's
+parameters through its conditions against one reference run under the shipped condition).
 
 With ``--margin M`` (in the metric's unit, declared before the data are seen): a
 non-inferiority test, H0 "the controller is worse by M or more" (mean paired difference
@@ -59,6 +65,16 @@ def compare(rows: dict[tuple[str, str], dict[int, float | None]], reference: str
             if s == scenario and c != reference:
                 table.append(paired(scenario, c, runs, reference, ref, margin))
     return table
+
+
+def with_reference_from(rows: dict[tuple[str, str], dict[int, float | None]],
+                        ref_rows: dict[tuple[str, str], dict[int, float | None]],
+                        reference: str) -> dict[tuple[str, str], dict[int, float | None]]:
+    """``rows`` with the reference controller's runs replaced by its runs in ``ref_rows``
+    (another condition's)."""
+    out = {k: v for k, v in rows.items() if k[1] != reference}
+    out.update({k: v for k, v in ref_rows.items() if k[1] == reference})
+    return out
 
 
 def compare_conditions(base: dict[tuple[str, str], dict[int, float | None]],
@@ -140,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--between", nargs=2, metavar=("BASE", "OTHER"), default=None,
                     help="pair each controller under condition OTHER against itself under "
                     "condition BASE (instead of against --reference)")
+    ap.add_argument("--reference-condition", default=None,
+                    help="take the reference's runs from this condition (the others' from "
+                    "--condition)")
     a = ap.parse_args(argv)
     if not a.csv.is_file():
         print(f"compare_seeds: {a.csv}: no such file", file=sys.stderr)
@@ -153,7 +172,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"{a.between[1]!r}", file=sys.stderr)
             return 2
     else:
-        table = compare(read_rows(a.csv, a.metric, a.condition), a.reference, a.margin)
+        rows = read_rows(a.csv, a.metric, a.condition)
+        if a.reference_condition is not None:
+            rows = with_reference_from(rows, read_rows(a.csv, a.metric, a.reference_condition),
+                                       a.reference)
+        table = compare(rows, a.reference, a.margin)
+        if not table:
+            print(f"compare_seeds: no run of the reference {a.reference!r} beside another "
+                  "controller's in the rows selected", file=sys.stderr)
+            return 2
     sys.stdout.write(markdown(table, a.metric, 1000.0 if metres else 1.0,
                               "mm" if metres else "its unit"))
     return 0

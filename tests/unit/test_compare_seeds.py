@@ -97,3 +97,25 @@ def test_between_pairs_each_controller_with_itself_under_the_other_condition(tmp
     assert r["mean_diff"] == pytest.approx(0.003)
     assert cs.main([str(path), "--between", "base", "retuned"]) == 0
     assert cs.main([str(path), "--between", "base", "nowhere"]) == 2
+
+
+def test_the_reference_may_come_from_another_condition(tmp_path):
+    """``--reference-condition``: a controller's runs under a diagnostic condition against the
+    reference's under the shipped one, paired by seed; without it the rows of the condition
+    hold no reference and the tool says so."""
+    vals = {}
+    for s in range(8):
+        vals[("ref", s, "all")] = 0.060 + 0.001 * s
+        vals[("ref", s, "soft")] = 1.0                 # must not be used
+        vals[("a", s, "soft")] = 0.058 + 0.001 * s + 0.0002 * (s % 2)
+    path = _write(tmp_path, vals)
+    rows = cs.with_reference_from(cs.read_rows(path, "max_abs_lateral_error_m", "soft"),
+                                  cs.read_rows(path, "max_abs_lateral_error_m", "all"), "ref")
+    (r,) = cs.compare(rows, "ref")
+    assert r["pairs"] == 8 and r["better"] == 8
+    assert r["mean_diff"] == pytest.approx(-0.0019)
+    assert cs.main([str(path), "--condition", "soft", "--reference", "ref",
+                    "--reference-condition", "all"]) == 0
+    vals = {k: v for k, v in vals.items() if not (k[0] == "ref" and k[2] == "soft")}
+    assert cs.main([str(_write(tmp_path, vals)), "--condition", "soft",
+                    "--reference", "ref"]) == 2

@@ -58,7 +58,6 @@ import time
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
@@ -98,6 +97,7 @@ from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.sensing import sensors_from_params
 from fourws_sim.core.simulator import Simulator
 from fourws_sim.plant_config import PlantNodeConfig
+from fourws_sim.plant_messages import fill_imu, fill_odom, reference_messages
 
 
 class PlantNode(Node):
@@ -467,49 +467,18 @@ class PlantNode(Node):
             self.pub_truth.publish(truth)
         self._clock_msg.clock = stamp
         self.pub_clock.publish(self._clock_msg)
-        o = self.seen
-        odom = self._odom_msg
-        odom.pose.pose.position.x, odom.pose.pose.position.y = o.x, o.y
-        odom.pose.pose.orientation.z = math.sin(0.5 * o.yaw)
-        odom.pose.pose.orientation.w = math.cos(0.5 * o.yaw)
-        odom.twist.twist.linear.x, odom.twist.twist.linear.y = o.vx, o.vy
-        odom.twist.twist.angular.z = o.yaw_rate
-        self.pub_odom.publish(odom)
+        self.pub_odom.publish(fill_odom(self._odom_msg, self.seen))
         if self.pub_imu is not None:
             imu, joints = self._imu_msg, self._joints_msg
             imu.header.stamp = joints.header.stamp = stamp
-            imu.angular_velocity.z = o.yaw_rate
-            imu.linear_acceleration.x, imu.linear_acceleration.y = o.ax, o.ay
-            # specific force of a level car: gravity (as an IMU measures it)
-            imu.linear_acceleration.z = self.scenario.vehicle.gravity_mps2
-            imu.orientation.z, imu.orientation.w = (odom.pose.pose.orientation.z,
-                                                    odom.pose.pose.orientation.w)
-            joints.position = [o.steer_front, o.steer_rear, 0.0, 0.0, 0.0, 0.0]
-            joints.velocity = [0.0, 0.0, *(float(w) for w in o.wheel_speed)]
+            fill_imu(imu, joints, self.seen, self.scenario.vehicle.gravity_mps2)
             self.pub_imu.publish(imu)
             self.pub_joints.publish(joints)
         self.last_publish = time.monotonic()
 
     def _publish_reference(self) -> None:
-        ref = self.scenario.path
-        msg = ReferenceTrajectory()
-        msg.header.frame_id = "map"
-        msg.x, msg.y = ref.x.tolist(), ref.y.tolist()
-        msg.yaw, msg.curvature = ref.yaw.tolist(), ref.curvature.tolist()
-        msg.speed = ref.speed.tolist()
+        msg, path = reference_messages(self.scenario.path, self.params.config.path_pose_spacing_m)
         self.pub_ref.publish(msg)
-        path = Path()
-        path.header.frame_id = "map"
-        s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(ref.x), np.diff(ref.y)))])
-        keep = np.unique(np.searchsorted(s, np.arange(0.0, s[-1],
-                                                      self.params.config.path_pose_spacing_m)))
-        for i in keep:
-            pose = PoseStamped()
-            pose.header.frame_id = "map"
-            pose.pose.position.x, pose.pose.position.y = float(ref.x[i]), float(ref.y[i])
-            pose.pose.orientation.z = math.sin(0.5 * ref.yaw[i])
-            pose.pose.orientation.w = math.cos(0.5 * ref.yaw[i])
-            path.poses.append(pose)
         self.pub_path.publish(path)
 
     def _publish_status(self, state: str, reason: str, completed: bool = False) -> dict:
