@@ -28,7 +28,8 @@ One call of :meth:`MpcController.step` at time k, stage by stage:
    infeasible); when the QP is still infeasible (a lagging steering angle that keeps
    moving the state after the start), it is solved again without the hard bounds and the
    status says so (:data:`STATE_BOUNDS_DROPPED`); the paper's weights through the cost
-   scaling (``cost_scaling``);
+   scaling (``cost_scaling``); with ``terminal_cost: lqr`` (beyond the paper) the
+   velocity-form LQR cost-to-go at the horizon's end (``terminal_cost``);
 7. **result**: u(k) = u(k−1) + Δu*(k), eq. (22), or the fallback; the step's history (with
    the buffer of commands sent) is committed only here.
 
@@ -65,10 +66,14 @@ from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_mo
 from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution
 from fourws_mpc.core.qp_solver import QpSettings, QpSolver, QpStatus, make_qp_solver
 from fourws_mpc.core.reference import NearestPoint, Reference
+from fourws_mpc.core.terminal_cost import terminal_weight
 
 G = 9.81
 #: appended to the solver status when the QP was solved without the hard state bounds
 STATE_BOUNDS_DROPPED = "hard state bounds dropped (infeasible with them)"
+#: in the solver status when ``terminal_cost: lqr`` found no stabilising DARE solution at
+#: this step (the QP is then solved without the terminal cost)
+TERMINAL_COST_SKIPPED = "terminal cost skipped (no stabilising DARE solution)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -382,9 +387,17 @@ class MpcController:
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
         s_level = level_weights(c, r_eff)
+        terminal_w, note = None, ""
+        if c.terminal_cost == "lqr":
+            try:
+                terminal_w = terminal_weight(pred.Ak, pred.Bk, self._enabled, q_eff, r_eff)
+            except (ValueError, np.linalg.LinAlgError):
+                note = f", {TERMINAL_COST_SKIPPED}"
         sol = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev, pred.ref_out,
                             hz.n_p, hz.n_c, q_eff, r_eff, c.rho, bounds,
-                            warm_du_scaled=self._warm(hz.n_c), s_level=s_level)
+                            warm_du_scaled=self._warm(hz.n_c), s_level=s_level,
+                            terminal_w=terminal_w)
+        sol.status += note
         if sol.ok or sol.code is not QpStatus.PRIMAL_INFEASIBLE or not bounds.state_bounds:
             return sol
         # the hard bounds cannot be met from here (the lagging steering still moves the
@@ -392,9 +405,10 @@ class MpcController:
         retry = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev,
                               pred.ref_out, hz.n_p, hz.n_c, q_eff, r_eff, c.rho,
                               dataclasses.replace(bounds, state_bounds=False),
-                              warm_du_scaled=self._warm(hz.n_c), s_level=s_level)
+                              warm_du_scaled=self._warm(hz.n_c), s_level=s_level,
+                              terminal_w=terminal_w)
         if retry.ok:
-            retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}"
+            retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}{note}"
             return retry
         return sol
 

@@ -33,6 +33,10 @@ i = 0..Np−1 (the plan held after N_c, as the prediction holds it)::
 It pins an input direction the increment-only cost leaves free (a yaw moment held by
 counter-steer: no motion, no cost; docs/mpc.md, "The yaw moment's free direction").
 
+Beyond the paper, an optional terminal cost (``terminal_cost``): the infinite-horizon LQR's
+cost-to-go in velocity form at the horizon's end, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref;
+Y − Y_ref] (``terminal_cost.py``); 0 in the paper's cost.
+
 Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
 by the squares of the characteristic sizes of the cost scaling, see ``cost_scaling.py``). The QP
 variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
@@ -70,6 +74,7 @@ from fourws_mpc.core.qp_solver import (
     QpSolver,
     QpStatus,
 )
+from fourws_mpc.core.terminal_cost import terminal_rows
 
 _EYE_U = np.eye(N_INPUT)
 _ZERO_U = np.zeros(N_INPUT)
@@ -300,6 +305,7 @@ class MpcQp:
         bounds: QpBounds,
         warm_du_scaled: np.ndarray | None = None,
         s_level: np.ndarray | None = None,
+        terminal_w: np.ndarray | None = None,
     ) -> QpSolution:
         """Solve one MPC step.
 
@@ -308,7 +314,9 @@ class MpcQp:
         ref (Np, 2): [φ_ref, Y_ref] at i = 1..Np; q_eff (2,) = [q_φ, q_Y] and r_eff (3,) the
         effective weights of the scaled cost; rho the slack weight; warm_du_scaled (Nc, 3)
         optional primal warm start in units of Δu_max; s_level (3,) the effective weights of
-        the input-level penalty (``input_level_cost``; None or zeros: the paper's cost).
+        the input-level penalty (``input_level_cost``; None or zeros: the paper's cost);
+        terminal_w the weight W of the velocity-form terminal cost z_Npᵀ W z_Np
+        (``terminal_cost.terminal_weight``; None: the paper's cost, none).
         """
         nu = N_INPUT
         inst = self.instance(n_p, n_c)
@@ -335,6 +343,14 @@ class MpcQp:
             M, wl = input_level_cost(n_p, n_c, D, s_level)
             H += 2.0 * (M.T @ (wl[:, None] * M))
             g += 2.0 * M.T @ (wl * u_prev_t)
+        if terminal_w is not None:
+            Zx, Zu, Zd = terminal_rows(Aa, Ba, da, matrix_powers(Aa, n_p), n_p, n_c)
+            z_free = Zx @ xi + Zd
+            z_free[-2:] -= ref[-1]
+            Zs = Zu * D[None, :]
+            WZ = terminal_w @ Zs
+            H += 2.0 * (Zs.T @ WZ)
+            g += 2.0 * (WZ.T @ z_free)
         qvec = np.concatenate([g, [0.0]])
 
         A = inst.A

@@ -1,0 +1,122 @@
+"""A terminal cost for the MPC: the infinite-horizon LQR's cost-to-go in velocity form
+(beyond the paper; ``terminal_cost: lqr``, docs/mpc.md, "A terminal cost").
+
+The paper's cost, eq. (16), ends at N_p: what happens after the horizon is not priced, so a
+short horizon (N_p 12, 0.12 s) must act hard on the road it sees, and a soft output weight
+lets the loop drift (docs/tuning.md). The textbook remedy (Rawlings, Mayne & Diehl, *Model
+Predictive Control*, 2nd ed., 2017, ch. 2) is a terminal cost V_f(x_Np) equal to the cost-to-go
+of the unconstrained infinite-horizon problem; the unconstrained MPC is then the LQR of the
+same stage cost, whatever N_p.
+
+The stage cost prices output errors and input *increments* (eq. 16), so its steady state
+needs no reference for the states and inputs that are not outputs when it is written in
+velocity form (Pannocchia & Rawlings, AIChE J. 49, 2003): with the lateral states x_L of
+the prediction model (every state but v_x and X: the speed is held, X drives nothing), the
+discrete model x(k+1) = A x + B u + d gives, for a reference held after the horizon,
+
+    z = [Δx_L; e],  Δx_L(k) = x_L(k) − x_L(k−1),  e = [φ − φ_ref, Y − Y_ref]
+    z(k+1) = A_z z(k) + B_z Δu(k),
+    A_z = [[A_L, 0], [C_L A_L, I]],   B_z = [[B_L], [C_L B_L]]
+
+(A_L, B_L the lateral rows and columns of A, B, the enabled inputs only; C_L picks φ, Y).
+With Q_z = diag(0, Q) and R the stage weights, P solves the DARE of (A_z, B_z, Q_z, R) and
+the cost-to-go from the horizon's end is z_Npᵀ P z_Np. The MPC's sum already holds the stage
+at i = N_p, so the terminal weight added is W = P − Q_z (positive semidefinite: P ≥ Q_z).
+With N_c = N_p and no active bound the MPC's first move is then the LQR's (unit test).
+The input-level penalty (``input_level_cost``) has no velocity form and is left out of P.
+The velocity form needs at least as many enabled inputs as outputs (two): with front steer
+alone a mode at λ = 1 is not stabilisable (the PBH test), no stabilising P exists, and
+``terminal_weight`` refuses (the controller then solves without a terminal cost and says
+so); a terminal cost for it would need the state form with a steady-state reference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from fourws_mpc.core.model import StateIdx
+
+#: model states left out of the velocity-form state: the speed (held) and X (drives nothing)
+NOT_LATERAL = (StateIdx.VX, StateIdx.X)
+#: the outputs of eq. (5), in the order of the QP's reference columns
+OUTPUTS = (StateIdx.PHI, StateIdx.Y)
+
+
+def lateral_rows(n_state: int) -> np.ndarray:
+    """Indices of the lateral states of a model with ``n_state`` states (appended states,
+    e.g. the steering actuators', are lateral)."""
+    return np.array([i for i in range(n_state) if i not in NOT_LATERAL])
+
+
+def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(A_z, B_z) of the velocity-form lateral model (module docstring); B_z has a column per
+    enabled input."""
+    rows = lateral_rows(Ak.shape[0])
+    A_l = Ak[np.ix_(rows, rows)]
+    B_l = Bk[np.ix_(rows, np.flatnonzero(enabled))]
+    out = [int(np.flatnonzero(rows == o)[0]) for o in OUTPUTS]
+    n_l, n_e = len(rows), len(OUTPUTS)
+    A_z = np.zeros((n_l + n_e, n_l + n_e))
+    A_z[:n_l, :n_l] = A_l
+    A_z[n_l:, :n_l] = A_l[out]
+    A_z[n_l:, n_l:] = np.eye(n_e)
+    B_z = np.vstack([B_l, B_l[out]])
+    return A_z, B_z
+
+
+def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
+                    q_eff: np.ndarray, r_eff: np.ndarray) -> np.ndarray:
+    """W = P − Q_z on z = [Δx_L; φ − φ_ref; Y − Y_ref] at the horizon's end.
+
+    Ak (n, n), Bk (n, 3): the discrete model of the step; enabled (3,) bool: the inputs the
+    preset uses; q_eff (2,) = [q_φ, q_Y], r_eff (3,): the effective weights the QP uses (SI
+    units). Raises ``np.linalg.LinAlgError`` or ``ValueError`` where the DARE has no
+    stabilising solution (the caller then solves without a terminal cost).
+    """
+    n_in = int(np.count_nonzero(enabled))
+    if n_in < len(OUTPUTS):
+        raise ValueError(f"terminal cost: the velocity form needs as many inputs as outputs "
+                         f"({len(OUTPUTS)}); {n_in} enabled leave a mode at 1 it cannot "
+                         "steer (front steer alone: no terminal cost)")
+    A_z, B_z = velocity_form(Ak, Bk, enabled)
+    n_z = A_z.shape[0]
+    Q_z = np.zeros((n_z, n_z))
+    Q_z[-2:, -2:] = np.diag(q_eff)
+    R = np.diag(np.asarray(r_eff, dtype=float)[np.asarray(enabled, dtype=bool)])
+    P = scipy.linalg.solve_discrete_are(A_z, B_z, Q_z, R)
+    if not np.all(np.isfinite(P)):
+        raise ValueError("terminal cost: the DARE gave a non-finite solution")
+    W = P - Q_z
+    return 0.5 * (W + W.T)
+
+
+def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, powers: np.ndarray,
+                  n_p: int, n_c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Zx, Zu, Zd) with z_Np + [0; ref_Np] = Zx ξ + Zu ΔU + Zd, from the augmented model of
+    ``qp.augment`` and its powers Ã^0..Ã^Np (``qp.matrix_powers``).
+
+    ξ_i = Ã^i ξ + Σ_{j<min(i,Nc)} Ã^{i−1−j} B̃ Δu_j + Σ_{m<i} Ã^m d̃; z takes the lateral rows
+    of ξ_Np − ξ_{Np−1}, then φ and Y of ξ_Np.
+    """
+    n = Aa.shape[0] - Ba.shape[1]
+    rows = lateral_rows(n)
+    pick = np.concatenate([rows, list(OUTPUTS)])
+    sign = np.concatenate([np.ones(len(rows)), np.zeros(len(OUTPUTS))])   # Δx rows subtract
+
+    def step(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x = powers[i]
+        u = np.zeros((Aa.shape[0], Ba.shape[1] * n_c))
+        for j in range(min(i, n_c)):
+            u[:, Ba.shape[1] * j:Ba.shape[1] * (j + 1)] = powers[i - 1 - j] @ Ba
+        d = powers[:i].sum(axis=0) @ da if i else np.zeros(Aa.shape[0])
+        return x, u, d
+
+    xN, uN, dN = step(n_p)
+    x1, u1, d1 = step(n_p - 1)
+    s = sign[:, None]
+    Zx = xN[pick] - s * x1[pick]
+    Zu = uN[pick] - s * u1[pick]
+    Zd = dN[pick] - sign * d1[pick]
+    return Zx, Zu, Zd

@@ -1,0 +1,152 @@
+"""The velocity-form LQR terminal cost (``terminal_cost``, beyond the paper): with it, the
+unconstrained MPC whose control horizon spans its prediction horizon is the infinite-horizon
+LQR of the same stage cost, whatever the horizon."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from fourws_mpc.core import qp as Q
+from fourws_mpc.core import terminal_cost as T
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.cost_scaling import effective_weights
+from fourws_mpc.core.model import N_INPUT, StateIdx
+from fourws_mpc.core.prediction_model import make_prediction_model
+
+V = 60.0 / 3.6
+DT = 0.01
+
+
+def _straight_model(cfg: MpcConfig, vx: float = V):
+    """(A_k, B_k, d_k) and ζ0 of the shipped prediction model at rest on a straight."""
+    model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
+                                  cfg.prediction_discretisation)
+    zeta = np.zeros(6)
+    zeta[StateIdx.VX] = vx
+    zeta, _ = model.measured_state(zeta, 0.0, 0.0)
+    Ak, Bk, dk = model.discretise(zeta, np.zeros(N_INPUT), DT)
+    return zeta, Ak, Bk, dk
+
+
+def _wide_bounds(enabled):
+    return Q.QpBounds(du_max=np.array([0.5, 0.5, 5.0e4]), u_max=np.array([1.0, 1.0, 1.0e6]),
+                      enabled=np.asarray(enabled), vy_max=10.0, r_max=10.0,
+                      band_phi=10.0, band_y=10.0, state_bounds=False)
+
+
+def _weights(cfg: MpcConfig):
+    return effective_weights(cfg, cfg.q_phi, cfg.q_y, cfg.r_ddelta, cfg.r_dmz)
+
+
+@pytest.mark.parametrize("enabled", [(True, True, True), (True, True, False)])
+@pytest.mark.parametrize("n_p", [4, 12, 30])
+def test_with_the_terminal_cost_the_first_move_is_the_infinite_horizon_lqr(enabled, n_p):
+    """A 1 cm offset at rest on a straight (an equilibrium: Δx = 0), N_c = N_p, no bound
+    active: the QP's first increment equals −K z0 of the DARE on the velocity-form model,
+    for every horizon; without the terminal cost it does not."""
+    cfg = MpcConfig()
+    zeta, Ak, Bk, dk = _straight_model(cfg)
+    zeta[StateIdx.Y] = 0.01
+    q_eff, r_eff = _weights(cfg)
+    en = np.array(enabled)
+    A_z, B_z = T.velocity_form(Ak, Bk, en)
+    n_z = A_z.shape[0]
+    Q_z = np.zeros((n_z, n_z))
+    Q_z[-2:, -2:] = np.diag(q_eff)
+    R = np.diag(r_eff[en])
+    P = scipy.linalg.solve_discrete_are(A_z, B_z, Q_z, R)
+    K = np.linalg.solve(R + B_z.T @ P @ B_z, B_z.T @ P @ A_z)
+    z0 = np.zeros(n_z)
+    z0[-1] = 0.01                                   # e_Y; Δx = 0 at the equilibrium
+    lqr_du = -K @ z0
+    W = T.terminal_weight(Ak, Bk, en, q_eff, r_eff)
+    assert np.all(np.linalg.eigvalsh(W) > -1e-9 * np.abs(W).max())
+    qp = Q.MpcQp()
+    ref = np.zeros((n_p, 2))
+    args = (Ak, Bk, dk, zeta, np.zeros(N_INPUT), ref, n_p, n_p, q_eff, r_eff, 1.0e6,
+            _wide_bounds(enabled))
+    sol = qp.solve(*args, terminal_w=W)
+    assert sol.ok
+    np.testing.assert_allclose(sol.du[0][en], lqr_du, rtol=1e-5, atol=1e-9)
+    np.testing.assert_array_equal(sol.du[0][~en], 0.0)
+    if n_p <= 12:                 # the paper's cost alone is the LQR only for a long horizon
+        plain = qp.solve(*args)
+        assert not np.allclose(plain.du[0][en], lqr_du, rtol=1e-2)
+
+
+def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan():
+    """Zx ξ + Zu ΔU + Zd against an explicit simulation of the augmented model over the
+    horizon, the input held after N_c (random state, plan and affine term)."""
+    cfg = MpcConfig()
+    _, Ak, Bk, _ = _straight_model(cfg)
+    rng = np.random.default_rng(3)
+    dk = rng.normal(size=Ak.shape[0]) * 1e-3
+    Aa, Ba, da = Q.augment(Ak, Bk, dk)
+    n_p, n_c = 12, 5
+    xi0 = rng.normal(size=Aa.shape[0]) * 0.01
+    dU = rng.normal(size=(n_c, N_INPUT)) * np.array([0.01, 0.01, 100.0])
+    Zx, Zu, Zd = T.terminal_rows(Aa, Ba, da, Q.matrix_powers(Aa, n_p), n_p, n_c)
+    xs = [xi0]
+    for i in range(n_p):
+        du = dU[i] if i < n_c else np.zeros(N_INPUT)
+        xs.append(Aa @ xs[-1] + Ba @ du + da)
+    rows = T.lateral_rows(Ak.shape[0])
+    expected = np.concatenate([xs[n_p][rows] - xs[n_p - 1][rows],
+                               xs[n_p][[StateIdx.PHI, StateIdx.Y]]])
+    np.testing.assert_allclose(Zx @ xi0 + Zu @ dU.reshape(-1) + Zd, expected,
+                               rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("enabled", [(True, False, False), (False, False, False)])
+def test_fewer_inputs_than_outputs_is_a_clear_error(enabled):
+    """Front steer alone: the velocity form has an unstabilisable mode at 1 (PBH), so no
+    stabilising DARE solution exists; the refusal names the reason."""
+    cfg = MpcConfig()
+    _, Ak, Bk, _ = _straight_model(cfg)
+    q_eff, r_eff = _weights(cfg)
+    A_z, B_z = T.velocity_form(Ak, Bk, np.array(enabled))
+    n = A_z.shape[0]
+    assert np.linalg.matrix_rank(np.hstack([A_z - np.eye(n), B_z])) < n
+    with pytest.raises(ValueError, match="as many inputs as outputs"):
+        T.terminal_weight(Ak, Bk, np.array(enabled), q_eff, r_eff)
+
+
+def test_a_front_steer_controller_runs_without_it_and_says_so():
+    """mpc_fws with terminal_cost lqr: every step is solved without the terminal cost, the
+    status names it, and the command equals the paper's cost's."""
+    from fourws_mpc.core.controller import TERMINAL_COST_SKIPPED, MpcController, VehicleSample
+    from fourws_mpc.core.reference import Reference
+
+    x = np.arange(0.0, 200.0, 0.5)
+    zero = np.zeros_like(x)
+    ref = Reference.from_arrays(x, zero, zero, zero, np.full_like(x, V))
+    state = VehicleSample(x=0.0, y=0.05, yaw=0.0, vx=V, vy=0.0, yaw_rate=0.0)
+    cmds = []
+    for mode in ("lqr", "none"):
+        c = MpcController(MpcConfig(controller="mpc_fws", use_rear_steer=False, use_dyc=False,
+                                    terminal_cost=mode))
+        r = c.step(0.0, state, ref)
+        cmds.append((r.delta_front, r.delta_rear, r.yaw_moment))
+        assert (TERMINAL_COST_SKIPPED in r.solver_status) == (mode == "lqr")
+    assert cmds[0] == cmds[1]
+
+
+def test_the_terminal_cost_keeps_a_soft_short_horizon_stable():
+    """The reason for it: at N_p 12 a soft lateral weight (s_Y 95 mm) leaves the paper's cost
+    with a slow loop; with the terminal cost the same weights give the LQR's decay (the
+    margins' closed loop, ideal world)."""
+    from fourws_bringup.core.margins import spectral_radius
+    from fourws_sim.core.vehicle_params import VehicleParams
+
+    base = MpcConfig(np_baseline=12, nc_baseline=12, horizons_mode="fixed",
+                     weights_mode="fixed", scale_y_m=0.095)
+    v = VehicleParams()
+    with_t = spectral_radius(dataclasses.replace(base, terminal_cost="lqr"), v, V)
+    without = spectral_radius(base, v, V)
+    assert with_t < without
+    assert with_t < 0.995 and math.isfinite(with_t)
