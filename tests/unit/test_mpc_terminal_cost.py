@@ -15,7 +15,7 @@ from fourws_mpc.core import qp as Q
 from fourws_mpc.core import terminal_cost as T
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
-from fourws_mpc.core.model import N_INPUT, StateIdx
+from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
 from fourws_mpc.core.prediction_model import make_prediction_model
 
 V = 60.0 / 3.6
@@ -26,7 +26,7 @@ def _straight_model(cfg: MpcConfig, vx: float = V):
     """(A_k, B_k, d_k) and ζ0 of the shipped prediction model at rest on a straight."""
     model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
                                   cfg.prediction_discretisation)
-    zeta = np.zeros(6)
+    zeta = np.zeros(N_STATE)
     zeta[StateIdx.VX] = vx
     zeta, _ = model.measured_state(zeta, 0.0, 0.0)
     Ak, Bk, dk = model.discretise(zeta, np.zeros(N_INPUT), DT)
@@ -79,18 +79,18 @@ def test_with_the_terminal_cost_the_first_move_is_the_infinite_horizon_lqr(enabl
         assert not np.allclose(plain.du[0][en], lqr_du, rtol=1e-2)
 
 
-def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan():
-    """Zx ξ + Zu ΔU + Zd against an explicit simulation of the augmented model over the
+@pytest.mark.parametrize("n_p,n_c", [(12, 5), (3, 3), (1, 1)])
+def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan(n_p, n_c):
+    """Zx ξ + Zu ΔU + Zd d̃ against an explicit simulation of the augmented model over the
     horizon, the input held after N_c (random state, plan and affine term)."""
     cfg = MpcConfig()
     _, Ak, Bk, _ = _straight_model(cfg)
     rng = np.random.default_rng(3)
     dk = rng.normal(size=Ak.shape[0]) * 1e-3
     Aa, Ba, da = Q.augment(Ak, Bk, dk)
-    n_p, n_c = 12, 5
     xi0 = rng.normal(size=Aa.shape[0]) * 0.01
     dU = rng.normal(size=(n_c, N_INPUT)) * np.array([0.01, 0.01, 100.0])
-    Zx, Zu, Zd = T.terminal_rows(Aa, Ba, da, Q.matrix_powers(Aa, n_p), n_p, n_c)
+    Zx, Zu, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c)
     xs = [xi0]
     for i in range(n_p):
         du = dU[i] if i < n_c else np.zeros(N_INPUT)
@@ -98,8 +98,52 @@ def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan():
     rows = T.lateral_rows(Ak.shape[0])
     expected = np.concatenate([xs[n_p][rows] - xs[n_p - 1][rows],
                                xs[n_p][[StateIdx.PHI, StateIdx.Y]]])
-    np.testing.assert_allclose(Zx @ xi0 + Zu @ dU.reshape(-1) + Zd, expected,
+    np.testing.assert_allclose(Zx @ xi0 + Zu @ dU.reshape(-1) + Zd @ da, expected,
                                rtol=1e-9, atol=1e-12)
+
+
+def test_a_car_on_a_turning_reference_owes_no_terminal_cost_for_its_heading_and_offset():
+    """The reference's own motion is the target of Δφ and ΔY: a plan whose φ and Y are the
+    reference's (here the reference is the car's own free prediction through a turn) leaves
+    the e rows and the Δφ, ΔY rows of the terminal error at zero."""
+    cfg = MpcConfig()
+    zeta, Ak, Bk, dk = _straight_model(cfg)
+    zeta[StateIdx.R] = 0.15                  # turning at 0.15 rad/s
+    zeta[StateIdx.VY] = 0.1
+    Aa, Ba, da = Q.augment(Ak, Bk, dk)
+    n_p, n_c = 12, 4
+    xi = np.concatenate([zeta, [0.02, 0.0, 0.0]])
+    xs = [xi]
+    for _ in range(n_p):
+        xs.append(Aa @ xs[-1] + da)
+    ref = np.array([[x[StateIdx.PHI], x[StateIdx.Y]] for x in xs[1:]])
+    assert abs(ref[-1, 0] - ref[-2, 0]) > 1e-3       # the reference turns
+    Zx, _, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c)
+    z = Zx @ xi + Zd @ da - T.reference_rows(ref, Ak.shape[0])
+    rows = list(T.lateral_rows(Ak.shape[0]))
+    on_path = [rows.index(StateIdx.PHI), rows.index(StateIdx.Y), len(rows), len(rows) + 1]
+    np.testing.assert_allclose(z[on_path], 0.0, atol=1e-12)
+
+
+def test_the_reference_enters_with_its_sign():
+    """A car 1 cm left of a reference at Y = 0 and a car at Y = 0 beside a reference 1 cm
+    right of it make the same first move."""
+    cfg = MpcConfig()
+    zeta, Ak, Bk, dk = _straight_model(cfg)
+    q_eff, r_eff = _weights(cfg)
+    en = np.ones(3, bool)
+    W = T.terminal_weight(Ak, Bk, en, q_eff, r_eff)
+    qp = Q.MpcQp()
+    moves = []
+    for y, y_ref in ((0.01, 0.0), (0.0, -0.01)):
+        z0 = zeta.copy()
+        z0[StateIdx.Y] = y
+        ref = np.zeros((12, 2))
+        ref[:, 1] = y_ref
+        sol = qp.solve(Ak, Bk, dk, z0, np.zeros(N_INPUT), ref, 12, 12, q_eff, r_eff, 1.0e6,
+                       _wide_bounds(en), terminal_w=W)
+        moves.append(sol.du[0])
+    np.testing.assert_allclose(moves[0], moves[1], rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("enabled", [(True, False, False), (False, False, False)])
@@ -116,24 +160,36 @@ def test_fewer_inputs_than_outputs_is_a_clear_error(enabled):
         T.terminal_weight(Ak, Bk, np.array(enabled), q_eff, r_eff)
 
 
-def test_a_front_steer_controller_runs_without_it_and_says_so():
-    """mpc_fws with terminal_cost lqr: every step is solved without the terminal cost, the
-    status names it, and the command equals the paper's cost's."""
-    from fourws_mpc.core.controller import TERMINAL_COST_SKIPPED, MpcController, VehicleSample
-    from fourws_mpc.core.reference import Reference
+def test_a_front_steer_preset_with_it_is_refused_at_start_up():
+    with pytest.raises(ValueError, match="two inputs"):
+        MpcConfig(use_rear_steer=False, use_dyc=False, terminal_cost="lqr")
+    MpcConfig(use_rear_steer=True, use_dyc=False, terminal_cost="lqr")
 
-    x = np.arange(0.0, 200.0, 0.5)
-    zero = np.zeros_like(x)
-    ref = Reference.from_arrays(x, zero, zero, zero, np.full_like(x, V))
-    state = VehicleSample(x=0.0, y=0.05, yaw=0.0, vx=V, vy=0.0, yaw_rate=0.0)
-    cmds = []
-    for mode in ("lqr", "none"):
-        c = MpcController(MpcConfig(controller="mpc_fws", use_rear_steer=False, use_dyc=False,
-                                    terminal_cost=mode))
-        r = c.step(0.0, state, ref)
-        cmds.append((r.delta_front, r.delta_rear, r.yaw_moment))
-        assert (TERMINAL_COST_SKIPPED in r.solver_status) == (mode == "lqr")
-    assert cmds[0] == cmds[1]
+
+def test_the_margins_gain_is_the_controllers_first_move():
+    """``fourws margins`` analyses the controller it reports on: its unconstrained gain with
+    the terminal cost (``margins.mpc_gain``) gives the QP's first increment from a state the
+    bounds leave free."""
+    from fourws_bringup.core.margins import model_matrices, mpc_gain
+
+    cfg = MpcConfig(horizons_mode="fixed", weights_mode="fixed", terminal_cost="lqr",
+                    mz_level_weight=0.0)
+    Ak, Bk, dk = model_matrices(cfg, V)
+    zeta = np.zeros(Ak.shape[0])
+    zeta[StateIdx.VX] = V
+    zeta[StateIdx.Y] = 0.002
+    K = mpc_gain(cfg, V)
+    q_eff, r_eff = _weights(cfg)
+    W = T.terminal_weight(Ak, Bk, cfg.enabled, q_eff, r_eff)
+    bounds = Q.QpBounds(du_max=cfg.du_max, u_max=np.full(3, 1e6), enabled=cfg.enabled,
+                        vy_max=10.0, r_max=10.0, band_phi=10.0, band_y=10.0,
+                        state_bounds=False)
+    sol = Q.MpcQp().solve(Ak, Bk, dk, zeta, np.zeros(N_INPUT),
+                          np.zeros((cfg.np_baseline, 2)), cfg.np_baseline, cfg.nc_baseline,
+                          q_eff, r_eff, cfg.rho, bounds, terminal_w=W)
+    assert np.all(np.abs(sol.du_scaled[0]) < 0.99)          # no increment bound active
+    np.testing.assert_allclose(sol.du[0], -K @ np.concatenate([zeta, np.zeros(N_INPUT)]),
+                               rtol=1e-5, atol=1e-9)
 
 
 def test_the_terminal_cost_keeps_a_soft_short_horizon_stable():

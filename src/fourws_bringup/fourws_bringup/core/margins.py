@@ -66,12 +66,12 @@ from fourws_mpc.core.prediction_model import make_prediction_model
 from fourws_mpc.core.qp import (
     augment,
     input_level_cost,
-    matrix_powers,
     output_matrix,
     prediction_matrices,
+    terminal_rows,
 )
 from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, hold_coefficients
-from fourws_mpc.core.terminal_cost import terminal_rows, terminal_weight
+from fourws_mpc.core.terminal_cost import terminal_terms, terminal_weight
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -220,12 +220,11 @@ def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
         tile_u[:, -N_INPUT:] = np.tile(np.eye(N_INPUT), (n_c, 1))
         G += 2.0 * M.T @ (wl[:, None] * tile_u)
     if cfg.terminal_cost == "lqr":            # qp.MpcQp.solve's terminal_w
-        Wt = terminal_weight(Ak, Bk, cfg.enabled, q_eff, r_eff)
-        Aa, Ba, da = augment(Ak, Bk, dk)
-        Zx, Zu, _ = terminal_rows(Aa, Ba, da, matrix_powers(Aa, n_p), n_p, n_c)
-        Zs = (Zu * D[None, :])[:, cols]
-        H += 2.0 * Zs.T @ Wt @ Zs
-        G += 2.0 * Zs.T @ Wt @ Zx
+        Zx, Zu, _ = terminal_rows(Aa, Ba, n_p, n_c)
+        hess, cross = terminal_terms(terminal_weight(Ak, Bk, cfg.enabled, q_eff, r_eff),
+                                     (Zu * D[None, :])[:, cols])
+        H += hess
+        G += cross @ Zx
     dz = -np.linalg.solve(H, G)                                       # scaled increments
     full = np.zeros((N_INPUT * n_c, psi.shape[1]))
     full[cols] = dz

@@ -74,7 +74,12 @@ from fourws_mpc.core.qp_solver import (
     QpSolver,
     QpStatus,
 )
-from fourws_mpc.core.terminal_cost import terminal_rows
+from fourws_mpc.core.terminal_cost import (
+    OUTPUTS,
+    lateral_rows,
+    reference_rows,
+    terminal_terms,
+)
 
 _EYE_U = np.eye(N_INPUT)
 _ZERO_U = np.zeros(N_INPUT)
@@ -146,6 +151,27 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
     theta = blocks.transpose(0, 2, 1, 3).reshape(no * n_p, nu * n_c)
     gamma = np.cumsum(CP[:n_p], axis=0).reshape(no * n_p, -1)
     return psi, theta, gamma
+
+
+def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, n_p: int, n_c: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Zx, Zu, Zd) with z_Np + z_ref = Zx ξ + Zu ΔU + Zd d̃: the velocity-form state of
+    ``terminal_cost`` at the horizon's end (the lateral rows of ξ_Np − ξ_{Np−1}, then φ and
+    Y of ξ_Np), from the condensed prediction of the lateral rows (:func:`prediction_matrices`,
+    eq. (6); ΔU step-major, the input held after N_c); z_ref is
+    ``terminal_cost.reference_rows``."""
+    n = Aa.shape[0] - Ba.shape[1]
+    rows = lateral_rows(n)
+    n_l = len(rows)
+    psi, theta, gamma = prediction_matrices(Aa, Ba, output_matrix(tuple(rows), n), n_p, n_c)
+    out = [int(np.flatnonzero(rows == o)[0]) for o in OUTPUTS]
+    end = slice((n_p - 1) * n_l, n_p * n_l)
+    before = slice((n_p - 2) * n_l, (n_p - 1) * n_l)
+    # ξ_0 = ξ itself when N_p = 1: its lateral rows for Ψ, nothing for Θ and Γ
+    start = (output_matrix(tuple(rows), n), np.zeros((n_l, theta.shape[1])),
+             np.zeros((n_l, gamma.shape[1])))
+    return tuple(np.vstack([m[end] - (m[before] if n_p >= 2 else s0), m[end][out]])
+                 for m, s0 in zip((psi, theta, gamma), start, strict=True))  # type: ignore[return-value]
 
 
 def input_level_cost(n_p: int, n_c: int, D: np.ndarray, s_eff: np.ndarray
@@ -344,13 +370,10 @@ class MpcQp:
             H += 2.0 * (M.T @ (wl[:, None] * M))
             g += 2.0 * M.T @ (wl * u_prev_t)
         if terminal_w is not None:
-            Zx, Zu, Zd = terminal_rows(Aa, Ba, da, matrix_powers(Aa, n_p), n_p, n_c)
-            z_free = Zx @ xi + Zd
-            z_free[-2:] -= ref[-1]
-            Zs = Zu * D[None, :]
-            WZ = terminal_w @ Zs
-            H += 2.0 * (Zs.T @ WZ)
-            g += 2.0 * (WZ.T @ z_free)
+            Zx, Zu, Zd = terminal_rows(Aa, Ba, n_p, n_c)
+            hess, cross = terminal_terms(terminal_w, Zu * D[None, :])
+            H += hess
+            g += cross @ (Zx @ xi + Zd @ da - reference_rows(ref, Ak.shape[0]))
         qvec = np.concatenate([g, [0.0]])
 
         A = inst.A

@@ -11,23 +11,33 @@ same stage cost, whatever N_p.
 The stage cost prices output errors and input *increments* (eq. 16), so its steady state
 needs no reference for the states and inputs that are not outputs when it is written in
 velocity form (Pannocchia & Rawlings, AIChE J. 49, 2003): with the lateral states x_L of
-the prediction model (every state but v_x and X: the speed is held, X drives nothing), the
-discrete model x(k+1) = A x + B u + d gives, for a reference held after the horizon,
+the prediction model (every state but v_x and X), the discrete model x(k+1) = A x + B u + d
+gives
 
-    z = [Δx_L; e],  Δx_L(k) = x_L(k) − x_L(k−1),  e = [φ − φ_ref, Y − Y_ref]
+    z = [Δx_L − Δx_L,ref; e],  Δx_L(k) = x_L(k) − x_L(k−1),  e = [φ − φ_ref, Y − Y_ref]
     z(k+1) = A_z z(k) + B_z Δu(k),
     A_z = [[A_L, 0], [C_L A_L, I]],   B_z = [[B_L], [C_L B_L]]
+
+X is dropped exactly (its column of A is zero off the diagonal). Dropping v_x is an
+approximation: its couplings with the lateral states (A[v_y, v_x], A[r, v_x], the v_x row's
+v_y r and steering-drag terms) vanish on a straight at zero input and are small beside the
+lateral dynamics elsewhere; the speed has its own controller. The reference's own motion
+after the horizon: on a curve a car on the path still turns (Δφ_ref = φ_ref,Np − φ_ref,Np−1,
+and ΔY_ref likewise, in the prediction frame), so Δx_L,ref holds those two increments of the
+reference's last step and zero for the states that are steady in steady cornering (v_y, r,
+the actuators' and tyres' lags).
 
 (A_L, B_L the lateral rows and columns of A, B, the enabled inputs only; C_L picks φ, Y).
 With Q_z = diag(0, Q) and R the stage weights, P solves the DARE of (A_z, B_z, Q_z, R) and
 the cost-to-go from the horizon's end is z_Npᵀ P z_Np. The MPC's sum already holds the stage
 at i = N_p, so the terminal weight added is W = P − Q_z (positive semidefinite: P ≥ Q_z).
-With N_c = N_p and no active bound the MPC's first move is then the LQR's (unit test).
+With N_c = N_p and no active bound the MPC's first move is then the LQR's on a straight at
+zero input (unit test).
 The input-level penalty (``input_level_cost``) has no velocity form and is left out of P.
 The velocity form needs at least as many enabled inputs as outputs (two): with front steer
 alone a mode at λ = 1 is not stabilisable (the PBH test), no stabilising P exists, and
-``terminal_weight`` refuses (the controller then solves without a terminal cost and says
-so); a terminal cost for it would need the state form with a steady-state reference.
+``terminal_weight`` refuses (``MpcConfig`` refuses the combination at start-up); a terminal
+cost for it would need the state form with a steady-state reference.
 """
 
 from __future__ import annotations
@@ -82,8 +92,9 @@ def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
                          "steer (front steer alone: no terminal cost)")
     A_z, B_z = velocity_form(Ak, Bk, enabled)
     n_z = A_z.shape[0]
+    n_e = len(OUTPUTS)
     Q_z = np.zeros((n_z, n_z))
-    Q_z[-2:, -2:] = np.diag(q_eff)
+    Q_z[n_z - n_e:, n_z - n_e:] = np.diag(q_eff)
     R = np.diag(np.asarray(r_eff, dtype=float)[np.asarray(enabled, dtype=bool)])
     P = scipy.linalg.solve_discrete_are(A_z, B_z, Q_z, R)
     if not np.all(np.isfinite(P)):
@@ -92,31 +103,22 @@ def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
     return 0.5 * (W + W.T)
 
 
-def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, powers: np.ndarray,
-                  n_p: int, n_c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Zx, Zu, Zd) with z_Np + [0; ref_Np] = Zx ξ + Zu ΔU + Zd, from the augmented model of
-    ``qp.augment`` and its powers Ã^0..Ã^Np (``qp.matrix_powers``).
+def reference_rows(ref: np.ndarray, n_state: int) -> np.ndarray:
+    """z_ref: the reference's part of z at the horizon's end (module docstring) for a model
+    of ``n_state`` states, from ``ref`` (N_p, 2) = [φ_ref, Y_ref] at i = 1..N_p: the last
+    step's increments of φ_ref and Y_ref in the Δx rows of φ and Y, then φ_ref and Y_ref."""
+    rows = lateral_rows(n_state)
+    z = np.zeros(len(rows) + len(OUTPUTS))
+    prev = ref[-2] if len(ref) >= 2 else np.zeros(len(OUTPUTS))
+    for k, o in enumerate(OUTPUTS):
+        z[int(np.flatnonzero(rows == o)[0])] = ref[-1, k] - prev[k]
+    z[len(rows):] = ref[-1]
+    return z
 
-    ξ_i = Ã^i ξ + Σ_{j<min(i,Nc)} Ã^{i−1−j} B̃ Δu_j + Σ_{m<i} Ã^m d̃; z takes the lateral rows
-    of ξ_Np − ξ_{Np−1}, then φ and Y of ξ_Np.
-    """
-    n = Aa.shape[0] - Ba.shape[1]
-    rows = lateral_rows(n)
-    pick = np.concatenate([rows, list(OUTPUTS)])
-    sign = np.concatenate([np.ones(len(rows)), np.zeros(len(OUTPUTS))])   # Δx rows subtract
 
-    def step(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x = powers[i]
-        u = np.zeros((Aa.shape[0], Ba.shape[1] * n_c))
-        for j in range(min(i, n_c)):
-            u[:, Ba.shape[1] * j:Ba.shape[1] * (j + 1)] = powers[i - 1 - j] @ Ba
-        d = powers[:i].sum(axis=0) @ da if i else np.zeros(Aa.shape[0])
-        return x, u, d
-
-    xN, uN, dN = step(n_p)
-    x1, u1, d1 = step(n_p - 1)
-    s = sign[:, None]
-    Zx = xN[pick] - s * x1[pick]
-    Zu = uN[pick] - s * u1[pick]
-    Zd = dN[pick] - sign * d1[pick]
-    return Zx, Zu, Zd
+def terminal_terms(W: np.ndarray, Zs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(2 Zsᵀ W Zs, 2 Zsᵀ W): the terminal cost's Hessian and the map from the free
+    terminal error to its gradient, in the QP's scaled increments (Zs = Zu D), in the
+    convention ½ zᵀ H z + gᵀ z of ``qp``."""
+    cross = 2.0 * (Zs.T @ W)
+    return cross @ Zs, cross
