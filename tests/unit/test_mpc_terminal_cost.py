@@ -11,25 +11,22 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from fourws_bringup.core.margins import model_matrices
 from fourws_mpc.core import qp as Q
 from fourws_mpc.core import terminal_cost as T
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights
-from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
-from fourws_mpc.core.prediction_model import make_prediction_model
+from fourws_mpc.core.model import N_INPUT, StateIdx
 
 V = 60.0 / 3.6
-DT = 0.01
 
 
 def _straight_model(cfg: MpcConfig, vx: float = V):
-    """(A_k, B_k, d_k) and ζ0 of the shipped prediction model at rest on a straight."""
-    model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
-                                  cfg.prediction_discretisation)
-    zeta = np.zeros(N_STATE)
+    """(A_k, B_k, d_k) of the shipped prediction model at rest on a straight
+    (``margins.model_matrices``, what ``fourws margins`` analyses) and that state ζ0."""
+    Ak, Bk, dk = model_matrices(cfg, vx)
+    zeta = np.zeros(Ak.shape[0])
     zeta[StateIdx.VX] = vx
-    zeta, _ = model.measured_state(zeta, 0.0, 0.0)
-    Ak, Bk, dk = model.discretise(zeta, np.zeros(N_INPUT), DT)
     return zeta, Ak, Bk, dk
 
 
@@ -170,7 +167,7 @@ def test_the_margins_gain_is_the_controllers_first_move():
     """``fourws margins`` analyses the controller it reports on: its unconstrained gain with
     the terminal cost (``margins.mpc_gain``) gives the QP's first increment from a state the
     bounds leave free."""
-    from fourws_bringup.core.margins import model_matrices, mpc_gain
+    from fourws_bringup.core.margins import mpc_gain
 
     cfg = MpcConfig(horizons_mode="fixed", weights_mode="fixed", terminal_cost="lqr",
                     mz_level_weight=0.0)

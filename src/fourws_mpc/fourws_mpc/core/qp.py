@@ -75,8 +75,8 @@ from fourws_mpc.core.qp_solver import (
     QpStatus,
 )
 from fourws_mpc.core.terminal_cost import (
-    OUTPUTS,
     lateral_rows,
+    output_positions,
     reference_rows,
     terminal_terms,
 )
@@ -132,16 +132,18 @@ def matrix_powers(A: np.ndarray, n: int) -> np.ndarray:
     return P
 
 
-def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int, n_c: int
+def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int, n_c: int,
+                        powers: np.ndarray | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ψ (no·Np, n+3), Θ (no·Np, 3·Nc) of eq. (6) and Γ (no·Np, n+3) of the affine term.
 
     Rows are ordered step-major (i = 1..Np, then the no outputs of C); columns of Θ step-major
-    (j = 0..Nc−1, then the 3 inputs). Y = Ψ ξ + Θ ΔU + Γ d̃.
+    (j = 0..Nc−1, then the 3 inputs). Y = Ψ ξ + Θ ΔU + Γ d̃. ``powers``: Ã^0..Ã^Np when the
+    caller has them (:func:`matrix_powers`), else computed here.
     """
     no = C.shape[0]
     nu = Ba.shape[1]
-    P = matrix_powers(Aa, n_p)
+    P = matrix_powers(Aa, n_p) if powers is None else powers
     CP = C @ P                                   # (Np+1, no, n+3): C Ã^m
     psi = CP[1:].reshape(no * n_p, -1)
     G = CP[:n_p] @ Ba                            # (Np, no, nu): C Ã^m B̃, m = 0..Np−1
@@ -153,25 +155,27 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
     return psi, theta, gamma
 
 
-def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, n_p: int, n_c: int
+def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, n_p: int, n_c: int,
+                  powers: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Zx, Zu, Zd) with z_Np + z_ref = Zx ξ + Zu ΔU + Zd d̃: the velocity-form state of
     ``terminal_cost`` at the horizon's end (the lateral rows of ξ_Np − ξ_{Np−1}, then φ and
     Y of ξ_Np), from the condensed prediction of the lateral rows (:func:`prediction_matrices`,
     eq. (6); ΔU step-major, the input held after N_c); z_ref is
-    ``terminal_cost.reference_rows``."""
+    ``terminal_cost.reference_rows``. ``powers`` as for :func:`prediction_matrices`."""
     n = Aa.shape[0] - Ba.shape[1]
-    rows = lateral_rows(n)
-    n_l = len(rows)
-    psi, theta, gamma = prediction_matrices(Aa, Ba, output_matrix(tuple(rows), n), n_p, n_c)
-    out = [int(np.flatnonzero(rows == o)[0]) for o in OUTPUTS]
+    sel = output_matrix(tuple(lateral_rows(n)), n)
+    n_l = sel.shape[0]
+    psi, theta, gamma = prediction_matrices(Aa, Ba, sel, n_p, n_c, powers)
+    out = list(output_positions(n))
     end = slice((n_p - 1) * n_l, n_p * n_l)
     before = slice((n_p - 2) * n_l, (n_p - 1) * n_l)
-    # ξ_0 = ξ itself when N_p = 1: its lateral rows for Ψ, nothing for Θ and Γ
-    start = (output_matrix(tuple(rows), n), np.zeros((n_l, theta.shape[1])),
-             np.zeros((n_l, gamma.shape[1])))
-    return tuple(np.vstack([m[end] - (m[before] if n_p >= 2 else s0), m[end][out]])
-                 for m, s0 in zip((psi, theta, gamma), start, strict=True))  # type: ignore[return-value]
+
+    def velocity(m: np.ndarray, start: np.ndarray | float) -> np.ndarray:
+        # ξ_0 = ξ itself when N_p = 1: its lateral rows for Ψ, nothing for Θ and Γ
+        return np.vstack([m[end] - (m[before] if n_p >= 2 else start), m[end][out]])
+
+    return velocity(psi, sel), velocity(theta, 0.0), velocity(gamma, 0.0)
 
 
 def input_level_cost(n_p: int, n_c: int, D: np.ndarray, s_eff: np.ndarray
@@ -351,7 +355,8 @@ class MpcQp:
         C = self._C.get(Ak.shape[0])
         if C is None:
             C = self._C[Ak.shape[0]] = output_matrix(n_state=Ak.shape[0])
-        psi, theta, gamma = prediction_matrices(Aa, Ba, C, n_p, n_c)
+        powers = matrix_powers(Aa, n_p)          # shared with the terminal rows
+        psi, theta, gamma = prediction_matrices(Aa, Ba, C, n_p, n_c, powers)
         free = (psi @ xi + gamma @ da).reshape(n_p, N_OUT)
         D, en, u_max_t, band = inst.tiled(bounds)
         th = (theta * D[None, :]).reshape(n_p, N_OUT, nu * n_c)
@@ -370,7 +375,7 @@ class MpcQp:
             H += 2.0 * (M.T @ (wl[:, None] * M))
             g += 2.0 * M.T @ (wl * u_prev_t)
         if terminal_w is not None:
-            Zx, Zu, Zd = terminal_rows(Aa, Ba, n_p, n_c)
+            Zx, Zu, Zd = terminal_rows(Aa, Ba, n_p, n_c, powers)
             hess, cross = terminal_terms(terminal_w, Zu * D[None, :])
             H += hess
             g += cross @ (Zx @ xi + Zd @ da - reference_rows(ref, Ak.shape[0]))

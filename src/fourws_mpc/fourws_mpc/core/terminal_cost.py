@@ -42,6 +42,8 @@ cost for it would need the state form with a steady-state reference.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import scipy.linalg
 
@@ -53,10 +55,20 @@ NOT_LATERAL = (StateIdx.VX, StateIdx.X)
 OUTPUTS = (StateIdx.PHI, StateIdx.Y)
 
 
+@lru_cache(maxsize=8)
 def lateral_rows(n_state: int) -> np.ndarray:
     """Indices of the lateral states of a model with ``n_state`` states (appended states,
-    e.g. the steering actuators', are lateral)."""
-    return np.array([i for i in range(n_state) if i not in NOT_LATERAL])
+    e.g. the steering actuators', are lateral); read-only, built once per model size."""
+    rows = np.array([i for i in range(n_state) if i not in NOT_LATERAL])
+    rows.flags.writeable = False
+    return rows
+
+
+@lru_cache(maxsize=8)
+def output_positions(n_state: int) -> tuple[int, ...]:
+    """Where the outputs φ, Y (``OUTPUTS``) sit among :func:`lateral_rows`."""
+    rows = list(lateral_rows(n_state))
+    return tuple(rows.index(o) for o in OUTPUTS)
 
 
 def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
@@ -66,7 +78,7 @@ def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
     rows = lateral_rows(Ak.shape[0])
     A_l = Ak[np.ix_(rows, rows)]
     B_l = Bk[np.ix_(rows, np.flatnonzero(enabled))]
-    out = [int(np.flatnonzero(rows == o)[0]) for o in OUTPUTS]
+    out = list(output_positions(Ak.shape[0]))
     n_l, n_e = len(rows), len(OUTPUTS)
     A_z = np.zeros((n_l + n_e, n_l + n_e))
     A_z[:n_l, :n_l] = A_l
@@ -107,12 +119,11 @@ def reference_rows(ref: np.ndarray, n_state: int) -> np.ndarray:
     """z_ref: the reference's part of z at the horizon's end (module docstring) for a model
     of ``n_state`` states, from ``ref`` (N_p, 2) = [φ_ref, Y_ref] at i = 1..N_p: the last
     step's increments of φ_ref and Y_ref in the Δx rows of φ and Y, then φ_ref and Y_ref."""
-    rows = lateral_rows(n_state)
-    z = np.zeros(len(rows) + len(OUTPUTS))
+    n_l = len(lateral_rows(n_state))
+    z = np.zeros(n_l + len(OUTPUTS))
     prev = ref[-2] if len(ref) >= 2 else np.zeros(len(OUTPUTS))
-    for k, o in enumerate(OUTPUTS):
-        z[int(np.flatnonzero(rows == o)[0])] = ref[-1, k] - prev[k]
-    z[len(rows):] = ref[-1]
+    z[list(output_positions(n_state))] = ref[-1] - prev
+    z[n_l:] = ref[-1]
     return z
 
 
