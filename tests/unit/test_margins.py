@@ -73,8 +73,9 @@ def test_predicted_growth_rate_matches_the_nonlinear_loop(dead_s, t0, t1):
 
 #: the paper's MPC as first shipped: eq. (1)-(4) (no steering lag, forward Euler) and the first
 #: output scaling (s_Y 5.9 mm, s_φ = 0.30°: the package defaults, before the tuning procedure)
+#: and the paper's cost, eq. (16), without a terminal cost
 PAPER = {"prediction_model": "single_track", "prediction_discretisation": "euler",
-         "scale_y_m": 0.0059, "scale_phi_deg": 0.30}
+         "scale_y_m": 0.0059, "scale_phi_deg": 0.30, "terminal_cost": "none"}
 
 
 def test_the_paper_prediction_leaves_the_fixed_weight_presets_unstable_on_the_ideal_plant():

@@ -58,17 +58,23 @@ def test_presets_load(name):
 
 
 def test_presets_share_one_cost_scaling_and_constraints():
-    """The paper's presets differ only in their switches; lqr_ff (another law) shares every
+    """The paper's presets differ only in their switches (the terminal cost is on wherever
+    there is rear steer); lqr_ff (another law) shares every
     key but its own tuned Bryson maxima, the MPC cost it does not have and its delay
     predictor (the steering lags without the tyre relaxation: its better margin)."""
     switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
-                "law")
+                "law", "terminal_cost")
     shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
     mpc = [_preset(n)[0] for n in PRESETS if n not in ("lqr_ff", "improved_np30")]
     for name in shared:
         assert len({getattr(c, name) for c in mpc}) == 1, name
+    # beyond the paper: every preset that can take the LQR terminal cost does (front steer
+    # alone cannot: MpcConfig refuses it)
+    for c in mpc:
+        assert c.terminal_cost == ("lqr" if c.use_rear_steer else "none"), c.controller
     lqr = _preset("lqr_ff")[0]
-    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model"}
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model",
+           "terminal_cost"}                    # an LQR has no horizon to end
     assert lqr.prediction_model == "single_track_actuators"
     assert {c.prediction_model for c in mpc} == {"single_track_relaxation"}
     for name in set(shared) - own:
