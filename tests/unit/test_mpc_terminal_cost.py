@@ -157,6 +157,55 @@ def test_fewer_inputs_than_outputs_is_a_clear_error(enabled):
         T.terminal_weight(Ak, Bk, np.array(enabled), q_eff, r_eff)
 
 
+def _dare_residual(A, B, Q, R, P):
+    BtPA = B.T @ P @ A
+    res = A.T @ P @ A - P - BtPA.T @ np.linalg.solve(R + B.T @ P @ B, BtPA) + Q
+    return np.abs(res).max() / np.abs(P).max()
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_doubling_dare_is_scipys_stabilising_solution(seed):
+    """``solve_dare`` (structure-preserving doubling) against scipy's QZ solver, the oracle:
+    random systems with unstable and marginal modes and a singular Q (observable through A),
+    and the velocity-form model at 60 and 120 km/h with the package weights; the solution
+    is the stabilising one (closed loop inside the unit circle) with a residual at round-off."""
+    rng = np.random.default_rng(seed)
+    n, m = 6 + seed % 5, 1 + seed % 3
+    A = rng.normal(size=(n, n)) * 1.2 / math.sqrt(n)          # some eigenvalues outside
+    B = rng.normal(size=(n, m))
+    C = rng.normal(size=(1 + seed % 2, n))
+    Q = C.T @ C                                                  # rank 1-2
+    R = np.diag(rng.uniform(0.1, 10.0, m))
+    P = T.solve_dare(A, B, Q, R)
+    P0 = scipy.linalg.solve_discrete_are(A, B, Q, R)
+    np.testing.assert_allclose(P, P0, rtol=1e-7, atol=1e-9 * np.abs(P0).max())
+    K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    assert np.abs(np.linalg.eigvals(A - B @ K)).max() < 1.0
+    assert _dare_residual(A, B, Q, R, P) < 1e-10
+    cfg = MpcConfig()
+    q_eff, r_eff = _weights(cfg)
+    en = np.array([True, True, True])
+    for kmh in (60.0, 120.0):
+        Ak, Bk, _ = model_matrices(cfg, kmh / 3.6)
+        A_z, B_z = T.velocity_form(Ak, Bk, en)
+        Q_z = np.zeros_like(A_z)
+        Q_z[-2:, -2:] = np.diag(q_eff)
+        R_z = np.diag(r_eff)
+        P = T.solve_dare(A_z, B_z, Q_z, R_z)
+        P0 = scipy.linalg.solve_discrete_are(A_z, B_z, Q_z, R_z)
+        np.testing.assert_allclose(P, P0, rtol=1e-6, atol=1e-9 * np.abs(P0).max())
+        assert _dare_residual(A_z, B_z, Q_z, R_z, P) < 1e-12
+
+
+def test_a_dare_without_a_stabilising_solution_is_a_clear_error():
+    """An unstable mode the input cannot reach: no stabilising P; the doubling says so
+    instead of returning a number (the controller then steps without the terminal cost)."""
+    A = np.diag([1.1, 0.5])
+    B = np.array([[0.0], [1.0]])
+    with pytest.raises(np.linalg.LinAlgError, match="no stabilising solution"):
+        T.solve_dare(A, B, np.eye(2), np.eye(1))
+
+
 def test_a_front_steer_preset_with_it_is_refused_at_start_up():
     with pytest.raises(ValueError, match="two inputs"):
         MpcConfig(use_rear_steer=False, use_dyc=False, terminal_cost="lqr")
