@@ -46,8 +46,8 @@ def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenar
     rear steer hold the path within half the front-steer controllers' max |e_Y| and a third
     of their sideslip (the rear axle steers the sideslip away; front steer alone must yaw the
     car into the lane; since the terminal cost's soft lateral weight the 4WS presets hold
-    about 3 mm against `lqr_ff`'s 8) and within the paper's 0.089 m; on the lead-out (15 s of it) the yaw rate
-    dies out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
+    about 3 mm against `lqr_ff`'s 8) and within the paper's 0.089 m; on the lead-out (15 s
+    of it) the yaw rate dies out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
     path, x_end = BENCH[scenario]
     logs = {c: run_closed_loop(str(path), c, IDEAL_STEPS) for c in PRESETS}
     m = {c: log.metrics() for c, log in logs.items()}
