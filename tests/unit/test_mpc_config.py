@@ -73,8 +73,7 @@ def test_presets_share_one_cost_scaling_and_constraints():
     for c in mpc:
         assert c.terminal_cost == ("lqr" if c.use_rear_steer else "none"), c.controller
     lqr = _preset("lqr_ff")[0]
-    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model",
-           "terminal_cost"}                    # an LQR has no horizon to end
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model"}
     assert lqr.prediction_model == "single_track_actuators"
     assert {c.prediction_model for c in mpc} == {"single_track_relaxation"}
     for name in set(shared) - own:

@@ -166,9 +166,10 @@ def _dare_residual(A, B, Q, R, P):
 @pytest.mark.parametrize("seed", range(8))
 def test_the_doubling_dare_is_scipys_stabilising_solution(seed):
     """``solve_dare`` (structure-preserving doubling) against scipy's QZ solver, the oracle:
-    random systems with unstable and marginal modes and a singular Q (observable through A),
-    and the velocity-form model at 60 and 120 km/h with the package weights; the solution
-    is the stabilising one (closed loop inside the unit circle) with a residual at round-off."""
+    random systems with unstable modes and a singular Q (observable through A), and the
+    velocity-form model (integrators at λ = 1) at 60 and 120 km/h with the package weights;
+    the solution is the stabilising one (closed loop inside the unit circle) with a residual
+    at round-off."""
     rng = np.random.default_rng(seed)
     n, m = 6 + seed % 5, 1 + seed % 3
     A = rng.normal(size=(n, n)) * 1.2 / math.sqrt(n)          # some eigenvalues outside

@@ -74,7 +74,8 @@ def test_a_study_tunes_by_the_shipped_procedure(study_path):
     """A study's tuning spec says it is the shipped spec with other groups: the same grid,
     margin constraint, scenarios, seeds and conditions. The grid may be the shipped grid of
     the study's day: it was widened by one soft step (exponent 6) for every group when the
-    4WS presets adopted the terminal cost (2026-12-04), so an older study's grid is a subset."""
+    4WS presets adopted the terminal cost (2026-12-04), so an older study's grid is a subset
+    (the older studies ran on the grid without 6)."""
     study = tuning.load_tuning_spec(study_path)
     shipped = tuning.load_tuning_spec(SPEC)
     assert set(study.grid_exponents) <= set(shipped.grid_exponents)
