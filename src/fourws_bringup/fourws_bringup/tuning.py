@@ -207,11 +207,12 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
     """(chosen values per group, one report row per kept candidate): steps 1-4.
 
-    Step 3 is evaluated with exact pruning: the kept candidates are run a batch of
-    ``workers`` runs at a time, and a candidate is abandoned as soon as one of its runs is
-    worse than the best complete candidate's score (its own score, a maximum, can then only
-    be worse). The candidate the presets hold now (:func:`shipped`) runs first, the others in
-    grid order: a good first bar prunes the rest sooner, and since pruning is strict and the
+    Step 3 is evaluated with exact pruning: a candidate is abandoned as soon as one of its runs
+    is worse than the best complete candidate's score (its own score, a maximum, can then only
+    be worse). The candidate the presets hold now (:func:`shipped`) runs first and alone,
+    ``workers`` of its runs at a time; then the next run of each of ``workers`` candidates at
+    once, in grid order, so a losing candidate costs one run, not a batch. A good first bar
+    prunes the rest sooner, and since pruning is strict and the
     choice compares (score, ρ, grid index), the order changes the time, never the choice,
     which is the one a full evaluation makes. The report, in grid order, gives a pruned
     candidate's lower bound."""
@@ -243,31 +244,43 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
             now = shipped(group)
             order = sorted(range(len(kept)), key=lambda k: kept[k][0] != now)
             rows: dict[int, dict[str, Any]] = {}
-            for k in order:
-                c, r = kept[k]
-                jobs = _jobs(spec, group, c)
-                by_ctrl: dict[str, float] = {}
-                done = 0
-                while done < len(jobs):
-                    for row in pool.map(run_job, jobs[done:done + batch]):
-                        by_ctrl[row["controller"]] = max(by_ctrl.get(row["controller"], 0.0),
-                                                         _score(row))
-                    done = min(done + batch, len(jobs))
-                    if best is not None and max(by_ctrl.values()) > best[0]:
-                        break
-                score = max(by_ctrl.values())
-                complete = done == len(jobs)
-                rows[k] = {"group": group.name, **c, "worst_rho": round(r, 5),
-                           "runs": done, "score_m": score if complete else None,
-                           "pruned_above_m": None if complete else score,
-                           **{f"max_ey_{preset_label(n)}": v for n, v in by_ctrl.items()}}
-                if progress:
-                    print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
-                          + (f"score {score:.4f} m" if complete else
-                             f"pruned after {done} runs (> {best[0]:.4f} m)"),
-                          file=sys.stderr)
-                if complete and (best is None or (score, r, k) < best):
-                    best = (score, r, k)
+            jobs = {k: _jobs(spec, group, kept[k][0]) for k in order}
+            done = dict.fromkeys(order, 0)
+            by_ctrl: dict[int, dict[str, float]] = {k: {} for k in order}
+            pending = list(order)
+            while pending:
+                # the first candidate (the presets' own, when on the grid) runs alone, a batch
+                # of its runs at a time, to set the bar; then the next run of each of `batch`
+                # candidates at once, so that a losing candidate is dropped after one run
+                if best is None:
+                    k0 = pending[0]
+                    work = [(k0, j) for j in jobs[k0][done[k0]:done[k0] + batch]]
+                else:
+                    work = [(k, jobs[k][done[k]]) for k in pending[:batch]]
+                for (k, _), row in zip(work, pool.map(run_job, [j for _, j in work]),
+                                       strict=True):
+                    by_ctrl[k][row["controller"]] = max(by_ctrl[k].get(row["controller"], 0.0),
+                                                        _score(row))
+                    done[k] += 1
+                for k in dict.fromkeys(k for k, _ in work):
+                    score = max(by_ctrl[k].values())
+                    complete = done[k] == len(jobs[k])
+                    if not complete and (best is None or score <= best[0]):
+                        continue                  # exact pruning: a maximum only grows
+                    c, r = kept[k]
+                    pending.remove(k)
+                    rows[k] = {"group": group.name, **c, "worst_rho": round(r, 5),
+                               "runs": done[k], "score_m": score if complete else None,
+                               "pruned_above_m": None if complete else score,
+                               **{f"max_ey_{preset_label(n)}": v
+                                  for n, v in by_ctrl[k].items()}}
+                    if progress:
+                        print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
+                              + (f"score {score:.4f} m" if complete else
+                                 f"pruned after {done[k]} runs (> {best[0]:.4f} m)"),
+                              file=sys.stderr)
+                    if complete and (best is None or (score, r, k) < best):
+                        best = (score, r, k)
             report += [rows[k] for k in sorted(rows)]
             chosen[group.name] = kept[best[2]][0]
     return chosen, report
