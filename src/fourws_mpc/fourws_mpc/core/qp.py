@@ -65,6 +65,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from fourws_mpc.core.condense import condense
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
 from fourws_mpc.core.qp_solver import (
     CondensedQp,
@@ -78,7 +79,6 @@ from fourws_mpc.core.terminal_cost import (
     lateral_rows,
     output_positions,
     reference_rows,
-    terminal_terms,
 )
 
 _EYE_U = np.eye(N_INPUT)
@@ -87,6 +87,8 @@ _ZERO_U = np.zeros(N_INPUT)
 OUT_ROWS = (StateIdx.PHI, StateIdx.Y, StateIdx.VY, StateIdx.R)
 N_OUT = len(OUT_ROWS)
 _INF = np.inf
+_OUT_ROWS = np.array(OUT_ROWS, dtype=np.int64)
+_NO_TERMINAL = np.zeros((0, 0))
 
 
 def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
@@ -299,6 +301,14 @@ class QpLayout:
         return np.vstack([top, eps_row, ub, hard, soft, soft])
 
 
+@lru_cache(maxsize=8)
+def _output_positions(n_state: int) -> np.ndarray:
+    """:func:`~fourws_mpc.core.terminal_cost.output_positions` as an index array."""
+    pos = np.array(output_positions(n_state), dtype=np.int64)
+    pos.flags.writeable = False
+    return pos
+
+
 def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows/cols of a pattern sorted into CSC storage order (column-major)."""
     order = np.lexsort((rows, cols))
@@ -350,35 +360,19 @@ class MpcQp:
         """
         nu = N_INPUT
         inst = self.instance(n_p, n_c)
+        n = Ak.shape[0]
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
-        C = self._C.get(Ak.shape[0])
-        if C is None:
-            C = self._C[Ak.shape[0]] = output_matrix(n_state=Ak.shape[0])
-        powers = matrix_powers(Aa, n_p)          # shared with the terminal rows
-        psi, theta, gamma = prediction_matrices(Aa, Ba, C, n_p, n_c, powers)
-        free = (psi @ xi + gamma @ da).reshape(n_p, N_OUT)
         D, en, u_max_t, band = inst.tiled(bounds)
-        th = (theta * D[None, :]).reshape(n_p, N_OUT, nu * n_c)
-        th_out = th[:, :2, :].reshape(2 * n_p, -1)       # φ, Y rows
-        th_hard = th[:, 2:, :].reshape(2 * n_p, -1)      # vy, r rows
-        e_free = (free[:, :2] - ref).reshape(-1)
-
-        w = np.repeat(q_eff[None, :], n_p, axis=0).reshape(-1)
-        r_s = np.repeat(r_eff[None, :], n_c, axis=0).reshape(-1) * D * D
-        H = 2.0 * (th_out.T @ (w[:, None] * th_out))
-        H[inst.diag] += 2.0 * r_s
         u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
-        g = 2.0 * th_out.T @ (w * e_free)
-        if s_level is not None and np.any(s_level):
-            M, wl = input_level_cost(n_p, n_c, D, s_level)
-            H += 2.0 * (M.T @ (wl[:, None] * M))
-            g += 2.0 * M.T @ (wl * u_prev_t)
-        if terminal_w is not None:
-            Zx, Zu, Zd = terminal_rows(Aa, Ba, n_p, n_c, powers)
-            hess, cross = terminal_terms(terminal_w, Zu * D[None, :])
-            H += hess
-            g += cross @ (Zx @ xi + Zd @ da - reference_rows(ref, Ak.shape[0]))
+        if terminal_w is None:
+            W, z_ref = _NO_TERMINAL, _ZERO_U
+        else:
+            W, z_ref = terminal_w, reference_rows(ref, n)
+        H, g, th_out, e_free, th_hard, hard_free = condense(
+            Aa, Ba, da, xi, _OUT_ROWS, n_c, D, np.ascontiguousarray(ref, dtype=float),
+            q_eff, r_eff, u_prev, _ZERO_U if s_level is None else s_level,
+            lateral_rows(n), _output_positions(n), W, z_ref)
         qvec = np.concatenate([g, [0.0]])
 
         A = inst.A
@@ -390,7 +384,6 @@ class MpcQp:
         A[inst.r_soft_lo, :ncol] = th_out
         A[inst.r_soft_lo, ncol] = band
 
-        hard_free = free[:, 2:].reshape(-1)
         if bounds.state_bounds:
             hard_lim = inst.hard_lim
             hard_lim[0::2] = bounds.vy_max
