@@ -43,7 +43,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-import scipy.linalg
+
+from fourws_mpc.core.expm import expm
 
 N_STATE = 6
 N_INPUT = 3
@@ -179,11 +180,12 @@ def jacobians(
 
 def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold discretisation (A_d, B_d) of ẋ = A x + B u by the matrix exponential
-    expm(T [[A, B], [0, 0]]) = [[A_d, B_d], [0, I]] (the one copy: MPC, LQR, margins)."""
+    expm(T [[A, B], [0, 0]]) = [[A_d, B_d], [0, I]] (the one copy: MPC, LQR, margins; the
+    exponential is the compiled ``expm``)."""
     n, m = B.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n], M[:n, n:] = A, B
-    E = scipy.linalg.expm(M * dt_s)
+    E = expm(M * dt_s)
     return E[:n, :n], E[:n, n:]
 
 

@@ -71,52 +71,87 @@ def output_positions(n_state: int) -> tuple[int, ...]:
     return tuple(rows.index(o) for o in OUTPUTS)
 
 
+@njit(cache=True)
+def _velocity_form(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                   out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A_z, B_z) from the lateral ``rows`` of A_k, B_k, the enabled input ``cols`` and the
+    positions ``out`` of φ, Y among the rows (:func:`velocity_form`)."""
+    n_l, n_e, n_in = rows.shape[0], out.shape[0], cols.shape[0]
+    A_z = np.zeros((n_l + n_e, n_l + n_e))
+    B_z = np.empty((n_l + n_e, n_in))
+    for i in range(n_l):
+        for j in range(n_l):
+            A_z[i, j] = Ak[rows[i], rows[j]]
+        for j in range(n_in):
+            B_z[i, j] = Bk[rows[i], cols[j]]
+    for e in range(n_e):
+        A_z[n_l + e, :n_l] = A_z[out[e], :n_l]
+        A_z[n_l + e, n_l + e] = 1.0
+        B_z[n_l + e] = B_z[out[e]]
+    return A_z, B_z
+
+
+def _indices(n_state: int, enabled: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return (lateral_rows(n_state), np.flatnonzero(enabled),
+            np.array(output_positions(n_state), dtype=np.int64))
+
+
 def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """(A_z, B_z) of the velocity-form lateral model (module docstring); B_z has a column per
     enabled input."""
-    rows = lateral_rows(Ak.shape[0])
-    A_l = Ak[np.ix_(rows, rows)]
-    B_l = Bk[np.ix_(rows, np.flatnonzero(enabled))]
-    out = list(output_positions(Ak.shape[0]))
-    n_l, n_e = len(rows), len(OUTPUTS)
-    A_z = np.zeros((n_l + n_e, n_l + n_e))
-    A_z[:n_l, :n_l] = A_l
-    A_z[n_l:, :n_l] = A_l[out]
-    A_z[n_l:, n_l:] = np.eye(n_e)
-    B_z = np.vstack([B_l, B_l[out]])
-    return A_z, B_z
+    f = np.ascontiguousarray
+    return _velocity_form(f(Ak, dtype=float), f(Bk, dtype=float),
+                          *_indices(Ak.shape[0], enabled))
+
+
+@njit(cache=True)
+def _terminal_weight(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                     out: np.ndarray, q_eff: np.ndarray, r_en: np.ndarray, rtol: float,
+                     max_steps: int) -> tuple[np.ndarray, bool]:
+    """(W, converged) of :func:`terminal_weight`, compiled."""
+    A_z, B_z = _velocity_form(Ak, Bk, rows, cols, out)
+    n_z, n_e = A_z.shape[0], out.shape[0]
+    Q_z = np.zeros((n_z, n_z))
+    for e in range(n_e):
+        Q_z[n_z - n_e + e, n_z - n_e + e] = q_eff[e]
+    P, ok = _sda(A_z, B_z, Q_z, np.diag(r_en), rtol, max_steps)
+    W = P - Q_z
+    return 0.5 * (W + W.T), ok
 
 
 def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
                     q_eff: np.ndarray, r_eff: np.ndarray) -> np.ndarray:
-    """W = P − Q_z on z = [Δx_L; φ − φ_ref; Y − Y_ref] at the horizon's end.
+    """W = P − Q_z on z = [Δx_L; φ − φ_ref; Y − Y_ref] at the horizon's end, P the DARE's
+    stabilising solution on (A_z, B_z, Q_z = diag(0, Q), R) (:func:`solve_dare`).
 
     Ak (n, n), Bk (n, 3): the discrete model of the step; enabled (3,) bool: the inputs the
     preset uses; q_eff (2,) = [q_φ, q_Y], r_eff (3,): the effective weights the QP uses (SI
     units). Raises ``np.linalg.LinAlgError`` or ``ValueError`` where the DARE has no
     stabilising solution (the caller then solves without a terminal cost).
     """
+    enabled = np.asarray(enabled, dtype=bool)
     n_in = int(np.count_nonzero(enabled))
     if n_in < len(OUTPUTS):
         raise ValueError(f"terminal cost: the velocity form needs as many inputs as outputs "
                          f"({len(OUTPUTS)}); {n_in} enabled leave a mode at 1 it cannot "
                          "steer (front steer alone: no terminal cost)")
-    A_z, B_z = velocity_form(Ak, Bk, enabled)
-    n_z = A_z.shape[0]
-    n_e = len(OUTPUTS)
-    Q_z = np.zeros((n_z, n_z))
-    Q_z[n_z - n_e:, n_z - n_e:] = np.diag(q_eff)
-    R = np.diag(np.asarray(r_eff, dtype=float)[np.asarray(enabled, dtype=bool)])
-    P = solve_dare(A_z, B_z, Q_z, R)
-    W = P - Q_z
-    return 0.5 * (W + W.T)
+    f = np.ascontiguousarray
+    W, ok = _terminal_weight(f(Ak, dtype=float), f(Bk, dtype=float),
+                             *_indices(Ak.shape[0], enabled), f(q_eff, dtype=float),
+                             f(np.asarray(r_eff, dtype=float)[enabled]), DARE_RTOL,
+                             DARE_MAX_STEPS)
+    if not ok:
+        raise np.linalg.LinAlgError(_NO_SOLUTION)
+    return W
 
 
 #: the doubling's stopping rule: relative change of P in the 1-norm
 DARE_RTOL = 1e-13
 #: doubling steps before giving up (the error contracts like ρ_cl^(2^k): 9 suffice here)
 DARE_MAX_STEPS = 40
+_NO_SOLUTION = ("terminal cost: the DARE has no stabilising solution (the doubling did not "
+                f"converge in {DARE_MAX_STEPS} steps)")
 
 
 @njit(cache=True)
@@ -175,8 +210,7 @@ def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np
     P, ok = _sda(f(A, dtype=float), f(B, dtype=float), f(Q, dtype=float), f(R, dtype=float),
                  DARE_RTOL, DARE_MAX_STEPS)
     if not ok:
-        raise np.linalg.LinAlgError("terminal cost: the DARE has no stabilising solution (the "
-                                    f"doubling did not converge in {DARE_MAX_STEPS} steps)")
+        raise np.linalg.LinAlgError(_NO_SOLUTION)
     return P
 
 
