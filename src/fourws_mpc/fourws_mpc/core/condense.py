@@ -132,3 +132,52 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
         H += cross @ Zs
         g += cross @ z
     return H, g, th_out, e_free, th_hard, hard_free
+
+
+@njit(cache=True)
+def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarray,
+                e_free: np.ndarray, th_hard: np.ndarray, hard_free: np.ndarray,
+                D: np.ndarray, en: np.ndarray, u_max_t: np.ndarray, u_prev: np.ndarray,
+                band: np.ndarray, vy_max: float, r_max: float, state_bounds: bool,
+                from_step: int) -> None:
+    """Stage 4: the step's rows of A and the bounds (lo, hi), in place, in the row order of
+    :class:`~fourws_mpc.core.qp.QpLayout` (Δũ box, ε ≥ 0, u bounds, hard v_y and r, soft
+    φ and Y above, soft below); A's Δũ box and ε rows are the layout's constants."""
+    n2, ncol = th_out.shape
+    nu = u_prev.shape[0]
+    n_c = ncol // nu
+    inf = np.inf
+    for k in range(ncol):
+        lo[k] = -en[k]
+        hi[k] = en[k]
+    lo[ncol] = 0.0
+    hi[ncol] = inf
+    o = ncol + 1                                   # u bounds: u(k−1) + Σ_{l≤j} D Δũ_l
+    for j in range(n_c):
+        for c in range(nu):
+            k = j * nu + c
+            for m in range(n_c):
+                A[o + k, m * nu + c] = D[m * nu + c] if m <= j else 0.0
+            lo[o + k] = -u_max_t[k] - u_prev[c]
+            hi[o + k] = u_max_t[k] - u_prev[c]
+    o_h = 2 * ncol + 1
+    o_sh = o_h + n2
+    o_sl = o_sh + n2
+    for i in range(n2):
+        A[o_h + i, :ncol] = th_hard[i]
+        A[o_sh + i, :ncol] = th_out[i]
+        A[o_sh + i, ncol] = -band[i]
+        A[o_sl + i, :ncol] = th_out[i]
+        A[o_sl + i, ncol] = band[i]
+        lim = inf
+        if state_bounds and i >= 2 * (from_step - 1):
+            lim = vy_max if i % 2 == 0 else r_max
+        lo[o_h + i] = -lim - hard_free[i]
+        hi[o_h + i] = lim - hard_free[i]
+        lo[o_sh + i] = -inf
+        hi[o_sh + i] = band[i] - e_free[i]
+        lo[o_sl + i] = -band[i] - e_free[i]
+        hi[o_sl + i] = inf
+    for k in range(lo.shape[0]):                   # a u(k−1) beyond its bound: never l > u
+        if lo[k] > hi[k]:
+            lo[k] = hi[k]

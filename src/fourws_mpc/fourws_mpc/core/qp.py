@@ -65,7 +65,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from fourws_mpc.core.condense import condense
+from fourws_mpc.core.condense import condense, constraints
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
 from fourws_mpc.core.qp_solver import (
     CondensedQp,
@@ -252,21 +252,13 @@ class QpLayout:
         self.pattern = QpPattern((n_p, n_c), nz, self.m, p_rows, p_cols, a_rows, a_cols,
                                  simple=nz)
         self.uses = 0
-        # constant parts of the dense constraint matrix (rows as in _a_mask)
+        # the dense constraint matrix (rows as in _a_mask): the Δũ box and ε rows are
+        # constant, the others refilled every step (condense.constraints)
         ncol = nu * n_c
         self.ncol = ncol
-        self.cum = np.kron(np.tril(np.ones((n_c, n_c))), np.eye(nu))
         self.A = np.zeros((self.m, ncol + 1))
         self.A[:ncol, :ncol] = np.eye(ncol)
         self.A[ncol, ncol] = 1.0
-        self.r_ub = slice(ncol + 1, 2 * ncol + 1)
-        o = 2 * ncol + 1
-        self.r_hard = slice(o, o + 2 * n_p)
-        self.r_soft_hi = slice(o + 2 * n_p, o + 4 * n_p)
-        self.r_soft_lo = slice(o + 4 * n_p, o + 6 * n_p)
-        self.inf2 = np.full(2 * n_p, _INF)
-        self.diag = np.diag_indices(ncol)
-        self.hard_lim = np.empty(2 * n_p)      # |vy|, |r| bounds per step, refilled each solve
         self.lo = np.empty(self.m)
         self.hi = np.empty(self.m)
         self._tiled_key: tuple | None = None
@@ -364,7 +356,6 @@ class MpcQp:
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
         D, en, u_max_t, band = inst.tiled(bounds)
-        u_prev_t = np.repeat(u_prev[None, :], n_c, axis=0).reshape(-1)
         if terminal_w is None:
             W, z_ref = _NO_TERMINAL, _ZERO_U
         else:
@@ -374,35 +365,10 @@ class MpcQp:
             q_eff, r_eff, u_prev, _ZERO_U if s_level is None else s_level,
             lateral_rows(n), _output_positions(n), W, z_ref)
         qvec = np.concatenate([g, [0.0]])
-
-        A = inst.A
-        ncol = inst.ncol
-        A[inst.r_ub, :ncol] = inst.cum * D[None, :]
-        A[inst.r_hard, :ncol] = th_hard
-        A[inst.r_soft_hi, :ncol] = th_out
-        A[inst.r_soft_hi, ncol] = -band
-        A[inst.r_soft_lo, :ncol] = th_out
-        A[inst.r_soft_lo, ncol] = band
-
-        if bounds.state_bounds:
-            hard_lim = inst.hard_lim
-            hard_lim[0::2] = bounds.vy_max
-            hard_lim[1::2] = bounds.r_max
-            if bounds.state_bounds_from_step > 1:
-                hard_lim[:2 * (bounds.state_bounds_from_step - 1)] = _INF
-        else:
-            hard_lim = inst.inf2
-        # rows in the order of QpLayout._a_mask: Δũ box, ε, u bounds, hard, soft hi, soft lo
-        lo, hi = inst.lo, inst.hi
-        r_u, r_h, r_sh, r_sl = inst.r_ub, inst.r_hard, inst.r_soft_hi, inst.r_soft_lo
-        lo[:ncol], hi[:ncol] = -en, en
-        lo[ncol], hi[ncol] = 0.0, _INF
-        lo[r_u], hi[r_u] = -u_max_t - u_prev_t, u_max_t - u_prev_t
-        lo[r_h], hi[r_h] = -hard_lim - hard_free, hard_lim - hard_free
-        lo[r_sh], hi[r_sh] = -_INF, band - e_free
-        lo[r_sl], hi[r_sl] = -band - e_free, _INF
-        # a u(k−1) outside its bound (never produced here) must not make l > u
-        np.minimum(lo, hi, out=lo)
+        A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
+        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_max_t, u_prev,
+                    band, float(bounds.vy_max), float(bounds.r_max), bool(bounds.state_bounds),
+                    int(bounds.state_bounds_from_step))
 
         warm = None
         if warm_du_scaled is not None:

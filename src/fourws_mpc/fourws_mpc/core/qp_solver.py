@@ -31,6 +31,7 @@ from typing import Protocol
 import numpy as np
 import osqp
 import scipy.sparse as sp
+from numba import njit
 
 from fourws_common.params import choose
 
@@ -155,23 +156,36 @@ def trusted(status: QpStatus, x: np.ndarray | None, accept_inaccurate: bool) -> 
     return bool(good and x is not None and np.all(np.isfinite(x)))
 
 
-def invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, *matrices: np.ndarray) -> str:
+@njit(cache=True)
+def _invalid_code(q: np.ndarray, P: np.ndarray, A: np.ndarray, lo: np.ndarray,
+                  hi: np.ndarray, infty: float) -> int:
+    """0 valid, 1-3 a non-finite q, P, A entry, 4 bad bounds, 5 l > u (:func:`invalid_data`,
+    one compiled pass)."""
+    for code, v in ((1, q), (2, P), (3, A)):
+        for x in v:
+            if not np.isfinite(x):
+                return code
+    for k in range(lo.shape[0]):
+        if np.isnan(lo[k]) or np.isnan(hi[k]) or lo[k] == np.inf or hi[k] == -np.inf:
+            return 4
+    for k in range(lo.shape[0]):
+        if max(lo[k], -infty) > min(hi[k], infty):
+            return 5
+    return 0
+
+
+_INVALID = ("", "non-finite q", "non-finite P", "non-finite A", "bad bounds", "l > u")
+
+
+def invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray,
+                 A: np.ndarray) -> str:
     """Why a solver's data validation would reject this QP ("" if it would not): a
     non-finite q, P or A entry, a NaN or +inf lower / -inf upper bound, or l > u (the bounds
     clipped to ±OSQP_INFTY first, as OSQP's wrapper does)."""
-    for name, v in zip(("q", "P", "A"), (q, *matrices), strict=False):
-        # fast path: a finite sum has no NaN and no ±inf term (an overflow is checked whole)
-        if not np.isfinite(np.add.reduce(v, axis=None)) and not np.all(np.isfinite(v)):
-            return f"non-finite {name}"
-    # a sum is NaN if a term is (or if it holds both infinities: then checked whole)
-    if (np.isnan(np.add.reduce(lo)) or np.isnan(np.add.reduce(hi))) and (
-            np.any(np.isnan(lo)) or np.any(np.isnan(hi))):
-        return "bad bounds"
-    if lo.max(initial=-_INF) == _INF or hi.min(initial=_INF) == -_INF:
-        return "bad bounds"
-    if np.any(np.maximum(lo, -OSQP_INFTY) > np.minimum(hi, OSQP_INFTY)):
-        return "l > u"
-    return ""
+    f = np.ascontiguousarray
+    return _INVALID[_invalid_code(f(q, dtype=float).ravel(), f(P, dtype=float).ravel(),
+                                  f(A, dtype=float).ravel(), f(lo, dtype=float),
+                                  f(hi, dtype=float), OSQP_INFTY)]
 
 
 def _csc_ones(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csc_matrix:
