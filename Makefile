@@ -5,7 +5,7 @@ ENV := source ros_ws/env.sh
 PYTEST_ARGS ?=
 OUT ?= runs/paper
 
-.PHONY: setup run test lint bench clean
+.PHONY: setup run test lint bench tune-check clean
 
 setup:
 	@bash tools/setup.sh
@@ -23,6 +23,10 @@ test: setup
 
 bench: setup
 	@$(ENV) && mkdir -p bench && python bench/run_all.py bench/results.json
+
+# the tuning procedure rerun for every group (CI reruns one group): the presets must be its choice
+tune-check: setup
+	@$(ENV) && fourws tune benchmarks/tuning.yaml --workers 2 --check
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log

@@ -11,7 +11,9 @@ Usage: python bench/bench_graph.py [OUT.json]   (default bench/results_graph.jso
    each process layout (``--compose none``, ``control``, ``all``; interleaved, ``ROUNDS``
    rounds, since this shared machine's speed drifts within minutes): the real-time factor,
    the MPC step inside the node and ``step_latency_ms`` (per chain stage, from the bag).
-3. ``in_process``: the same run in the in-process loop (``run_closed_loop``, the same cores
+3. ``end_to_end``: the wall time of ``fourws run`` with its default options (report and
+   plots), as a user sees it, once per round;
+4. ``in_process``: the same run in the in-process loop (``run_closed_loop``, the same cores
    the graph reproduces), in the same rounds, so each layout's RTF is compared with the
    in-process RTF of the same minutes (``rtf_ratio``: median graph RTF / median in-process).
 
@@ -113,6 +115,18 @@ def bench_run(layout: str) -> dict:
     return {"run": "improved@dlc_60_mu05", "compose": layout, **{k: m.get(k) for k in keys}}
 
 
+def bench_end_to_end() -> dict:
+    """Wall time of ``fourws run`` as a user types it (default options: report and plots
+    included), from the command's start to its exit."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = ["fourws", "run", "--scenario", "dlc_60_mu05", "--controller", "improved",
+               "--out", str(Path(tmp) / "run")]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL,  # noqa: S603
+                       stderr=subprocess.DEVNULL)
+        return {"run": "improved@dlc_60_mu05", "wall_s": time.perf_counter() - t0}
+
+
 def bench_in_process() -> dict:
     """Wall time of the in-process loop on the same run: the ``run_closed_loop`` call alone
     (its set-up included), as the graph's RTF counts from the plant's first answered state."""
@@ -144,8 +158,11 @@ def main(out: str) -> int:
               f"(p90 {hop['round_trip_us_p90']:.0f}): {hop['stage_floor_ms']:.2f} ms per stage")
     finally:
         lease.release()
-    runs, in_process = [], []
+    runs, in_process, end_to_end = [], [], []
     for _ in range(ROUNDS):
+        e2e = bench_end_to_end()
+        end_to_end.append(e2e)
+        print(f"fourws run, end to end: {e2e['wall_s']:.2f} s")
         ip = bench_in_process()
         in_process.append(ip)
         print(f"in-process loop: RTF {ip['real_time_factor']:.2f}")
@@ -162,7 +179,8 @@ def main(out: str) -> int:
              for layout in LAYOUTS}
     print("graph RTF / in-process RTF: " + ", ".join(f"{k} {v:.2f}" for k, v in ratio.items()))
     Path(out).write_text(json.dumps({"hop": hop, "runs": runs, "in_process": in_process,
-                                     "in_process_rtf_median": ip_rtf, "rtf_ratio": ratio},
+                                     "in_process_rtf_median": ip_rtf, "rtf_ratio": ratio,
+                                     "end_to_end": end_to_end},
                                     indent=2) + "\n")
     return 0
 

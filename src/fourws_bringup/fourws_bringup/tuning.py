@@ -35,7 +35,7 @@ import functools
 import math
 import re
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -356,11 +356,24 @@ def _fmt(v: Any) -> str:
     return "" if v is None else str(v)
 
 
+def only_groups(spec: TuningSpec, names: Sequence[str] | None) -> TuningSpec:
+    """The spec with only the groups called ``names`` (None or empty: all of them); an
+    unknown name raises ``ValueError``."""
+    if not names:
+        return spec
+    known = [g.name for g in spec.groups]
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"--group {', '.join(unknown)}: not a group of the spec "
+                         f"(groups: {', '.join(known)})")
+    return dataclasses.replace(spec, groups=tuple(g for g in spec.groups if g.name in names))
+
+
 def tune_cli(spec_path: str, workers: int, check: bool, report_path: str | None,
-             presets: str | None = None) -> int:
-    """``fourws tune``."""
+             presets: str | None = None, groups: Sequence[str] | None = None) -> int:
+    """``fourws tune``; ``groups``: tune only these groups of the spec."""
     try:
-        spec = load_tuning_spec(spec_path)
+        spec = only_groups(load_tuning_spec(spec_path), groups)
         directory = Path(presets) if presets else presets_dir(spec_path)
         for g in spec.groups:
             for c in g.controllers:
