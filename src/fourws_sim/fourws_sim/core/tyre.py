@@ -47,9 +47,10 @@ standstill; it also bounds the wheel-spin eigenvalue −R² K_κ / (I_w v_min), 
 RK4 step must resolve (see ``vehicle.py``).
 
 Two implementations of the same equations: :func:`forces` (numpy, vectorised over any
-shape, for analysis and tests) and :func:`forces_scalar` (plain floats, for the simulator's
+shape, for analysis and tests) and :func:`forces_scalar` (plain floats, for the plain-float
 derivative function, where numpy's per-call overhead on 4-element arrays dominates). A unit
-test checks that they agree.
+test checks that they agree. The simulator runs a compiled twin of :func:`forces_scalar`
+(``model_jit.tyre_forces``, checked against it by another test).
 """
 
 from __future__ import annotations

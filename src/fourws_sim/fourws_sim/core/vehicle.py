@@ -66,7 +66,9 @@ diverges at low speed), so keep the default 1 ms.
 
 The derivative function :meth:`TwoTrackModel.derivatives` is written in plain Python floats
 (tuple unpacking in :class:`State` order, no numpy): on 4-element arrays numpy's call overhead
-is larger than the arithmetic, and this function runs 40 times per 10 ms control step.
+is larger than the arithmetic, and this function runs 40 times per 10 ms control step. It is
+the readable reference: the simulator runs its compiled twin (``model_jit.py``, numba, the same
+operations in the same order; a unit test checks they agree), ``Simulator(jit=False)`` this one.
 """
 
 from __future__ import annotations
@@ -152,6 +154,12 @@ class TwoTrackModel:
                        1.0 / (p.tyre_relaxation_load_factor * p.tyre_nominal_load_n))
         self._kf = front.scalar_constants(front.cornering_coeff)
         self._kr = rear.scalar_constants(rear.cornering_coeff)
+
+    def constants(self) -> tuple[float, ...]:
+        """Every constant :meth:`derivatives` uses, flat: the model's own 25, the relaxation
+        pair (peak σ, 1/(p_Ty2 F_z0)), :data:`SIGMA_MIN_M`, then the front and the rear tyre's
+        ``scalar_constants`` (11 each). The layout ``model_jit`` (the compiled twin) reads."""
+        return (*self._c, *self._relax, SIGMA_MIN_M, *self._kf, *self._kr)
 
     def derivatives(
         self,
