@@ -44,4 +44,11 @@ cd "$ROOT/ros_ws"
 colcon --log-base log build --base-paths ../src --event-handlers console_cohesion- summary- \
     --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" 2>&1 | tail -n 30
 test "${PIPESTATUS[0]}" -eq 0
+cd "$ROOT"
+
+step "compile the numba kernels into their disk caches (installed copy, then the sources)"
+set +u; source "$ROOT/ros_ws/env.sh"; set -u
+python tools/warm_jit.py
+PYTHONPATH="$ROOT/src/fourws_common:$ROOT/src/fourws_sim:$ROOT/src/fourws_mpc:$ROOT/src/fourws_torque_alloc:$ROOT/src/fourws_bringup${PYTHONPATH:+:$PYTHONPATH}" \
+  python tools/warm_jit.py
 step "done"
