@@ -11,13 +11,16 @@
                    [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
     fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
     fourws tune SPEC.yaml [--workers N] [--check] [--report FILE] [--presets DIR]
+                [--group NAME ...]
     fourws scenarios | fourws controllers
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+import threading
 from pathlib import Path
 
 from .core.conditions import IDEAL, Condition, load_condition
@@ -230,7 +233,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 def _cmd_tune(args: argparse.Namespace) -> int:
     from .tuning import tune_cli
 
-    return tune_cli(args.spec, args.workers, args.check, args.report, args.presets)
+    return tune_cli(args.spec, args.workers, args.check, args.report, args.presets,
+                    args.group)
 
 
 def _cmd_list(kind: str) -> int:
@@ -356,6 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "the presets the spec names (default: the checkout's "
                    "src/fourws_bringup/config/controllers beside the spec, else the installed "
                    "presets); a preset the spec gives as a .yaml file is written in place")
+    t.add_argument("--group", action="append", default=None, metavar="NAME",
+                   help="tune only this group of the spec (repeatable; default: every group)")
     t.set_defaults(func=_cmd_tune)
 
     sub.add_parser("scenarios", help="list scenario names").set_defaults(
