@@ -18,9 +18,7 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
-import threading
 from pathlib import Path
 
 from .core.conditions import IDEAL, Condition, load_condition

@@ -80,7 +80,7 @@ def _expm(A: np.ndarray, theta: np.ndarray, b3: np.ndarray,
         if norm > theta[4]:
             s = int(np.ceil(np.log2(norm / theta[4])))
         U, V = _pade13(A / 2.0 ** s, b13)
-    E = np.linalg.solve(V - U, V + U)
+    E = np.ascontiguousarray(np.linalg.solve(V - U, V + U))
     for _ in range(s):
         E = E @ E
     return E
