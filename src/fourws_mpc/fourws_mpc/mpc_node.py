@@ -45,7 +45,7 @@ from fourws_common.topics import (
 )
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MEAS_FIELDS, VehicleSample
-from fourws_mpc.core.laws import make_controller
+from fourws_mpc.core.laws import make_controller, warm_up
 from fourws_mpc.core.reference import Reference
 from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
 
@@ -57,6 +57,7 @@ class MpcNode(Node):
         super().__init__("mpc_node")
         self.params = ParamBinding(self, MpcConfig, on_change=self._on_params)
         self.ctrl = make_controller(self.params.config)
+        warm_up(self.params.config)     # the compiled kernels loaded before the first state
         self.ref: Reference | None = None
         self.ref_msg: ReferenceTrajectory | None = None
         self.cached: tuple[MpcCommand, MpcDiagnostics] | None = None

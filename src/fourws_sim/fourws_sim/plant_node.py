@@ -99,6 +99,9 @@ from fourws_sim.core.simulator import Simulator
 from fourws_sim.plant_config import PlantNodeConfig
 from fourws_sim.plant_messages import fill_imu, fill_odom, reference_messages
 
+#: Wall period (s, steady clock) at which a waiting plant checks whether its graph is complete.
+START_CHECK_PERIOD_S = 0.01
+
 
 class PlantNode(Node):
     """Wires the plant core to topics; all physics is in fourws_sim.core."""
@@ -112,6 +115,7 @@ class PlantNode(Node):
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s,
                                            steer_dead_time_s=cfg.steer_dead_time_s)
+        self.sim.warm_up(cfg.dt_s)
         self.sensors = sensors_from_params(
             {f: getattr(cfg, f) for f in ("noise_sigma", "noise_tau_s", "noise_seed",
                                           "delay_periods", "tyre_forces",
@@ -207,6 +211,9 @@ class PlantNode(Node):
         self.create_timer(cfg.status_period_s, self._status_heartbeat, clock=self._steady)
         if cfg.wait_for_subscribers == 0:
             self._start()
+        else:  # the graph is checked every 10 ms until it is complete (start-up time only)
+            self._start_timer = self.create_timer(START_CHECK_PERIOD_S, self._start_check,
+                                                  clock=self._steady)
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
@@ -380,20 +387,28 @@ class PlantNode(Node):
             self.get_logger().info(f"fresh commands at step {self.step_k}: safe hold ended")
         self._advance(torque)
 
+    def _start_check(self) -> None:
+        """Start once the graph is complete: every subscriber present and holding the
+        reference (a controller that stays up across runs resets on it and answers state 0
+        with the new path)."""
+        if self.started or self.ended:
+            self._start_timer.cancel()
+            return
+        cfg = self.params.config
+        zero = Duration(seconds=0)
+        if (self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers
+                and self.pub_ref.get_subscription_count()
+                >= cfg.wait_for_reference_subscribers
+                and self.pub_ref.wait_for_all_acked(zero)):
+            self._start_timer.cancel()
+            self._start()
+
     def _watchdog(self) -> None:
         if self.ended:
             return
         cfg = self.params.config
         now = time.monotonic()
         if not self.started:
-            # every subscriber has the reference before the first state: a controller that
-            # stays up across runs resets on it and answers state 0 with the new path
-            zero = Duration(seconds=0)
-            if (self.pub_state.get_subscription_count() >= cfg.wait_for_subscribers
-                    and self.pub_ref.get_subscription_count()
-                    >= cfg.wait_for_reference_subscribers
-                    and self.pub_ref.wait_for_all_acked(zero)):
-                self._start()
             return
         if cfg.mode == "realtime":
             return

@@ -119,6 +119,14 @@ class Simulator:
         return cls(scenario.vehicle, scenario.road, scenario.initial, substep_s,
                    steer_dead_time_s)
 
+    def warm_up(self, dt_s: float = 0.01) -> None:
+        """Integrate one period of a throwaway twin at rest: it loads the compiled kernels
+        from numba's disk cache (docs/architecture.md, "Compiled numerics"), so that a node's
+        first step takes its usual time. This simulator does not change."""
+        twin = Simulator(self.vehicle, self.road, self.initial, self.substep_s,
+                         self._dead.substeps * self.substep_s if self._dead is not None else 0.0)
+        twin.advance(0.0, 0.0, np.zeros(4), dt_s)
+
     @property
     def t_s(self) -> float:
         """Simulated time, s."""
