@@ -15,7 +15,7 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
         *[
-            ("share/" + PACKAGE + "/" + d, glob(d + "/*.yaml"))
+            ("share/" + PACKAGE + "/" + d, glob(d + "/*.yaml") + glob(d + "/*.xml"))
             for d in sorted({p.rsplit("/", 1)[0] for p in glob("config/**/*.yaml", recursive=True)})
         ],
     ],
@@ -27,7 +27,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "fourws = fourws_bringup.cli:main",
+            "fourws = fourws_bringup.cli:entry",
             "recorder_node = fourws_bringup.recorder_node:main",
             "replay_node = fourws_bringup.replay_node:main",
             "container = fourws_bringup.container:main",

@@ -10,6 +10,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
+    # the default fuzzy response surfaces (fourws_mpc.core.fuzzy_weights.SHIPPED_SURFACES)
+    package_data={PACKAGE: ["data/*.npz"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),

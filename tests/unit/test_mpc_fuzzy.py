@@ -85,3 +85,70 @@ def test_controllers_with_one_spec_share_one_read_only_surface():
     other = FuzzyWeights(dataclasses.replace(FuzzySpec(), e_y_range_m=1.0))
     assert other.surfaces is not a.surfaces
     assert other.ratios(0.5, 0.0)[0] != a.ratios(0.5, 0.0)[0]
+
+
+def test_shipped_surfaces_equal_mamdani_on_the_grid():
+    """The package data the MPC loads at start-up is the default spec's surfaces, so it can
+    never drift from the rule base (regenerate: ``python -m fourws_mpc.core.fuzzy_weights
+    --write``)."""
+    import numpy as np
+
+    from fourws_mpc.core.fuzzy_weights import (
+        SHIPPED_SURFACES,
+        FuzzySpec,
+        load_shipped_surfaces,
+        surface_grid,
+    )
+
+    spec = FuzzySpec()
+    shipped = load_shipped_surfaces(spec)
+    assert shipped is not None, f"{SHIPPED_SURFACES} missing or made for another rule base"
+    EY, EP = np.meshgrid(*surface_grid(spec), indexing="ij")
+    np.testing.assert_allclose(shipped, mamdani(EY, EP, spec), rtol=0.0, atol=1e-12)
+
+
+def test_shipped_surfaces_are_used_only_for_their_own_spec(tmp_path):
+    """Another spec, a file for other rules or no file at all: the surfaces are computed."""
+    import dataclasses
+
+    from fourws_mpc.core.fuzzy_weights import (
+        FuzzySpec,
+        compute_surfaces,
+        load_shipped_surfaces,
+        response_surfaces,
+        write_shipped_surfaces,
+    )
+
+    spec = FuzzySpec()
+    small = dataclasses.replace(spec, grid_y=7, grid_phi=9)
+    assert load_shipped_surfaces(small) is None
+    np.testing.assert_array_equal(response_surfaces(small), compute_surfaces(small))
+    path = write_shipped_surfaces(tmp_path / "s.npz", small)
+    np.testing.assert_array_equal(load_shipped_surfaces(small, path), compute_surfaces(small))
+    assert load_shipped_surfaces(spec, path) is None           # made for another spec
+    assert load_shipped_surfaces(spec, tmp_path / "none.npz") is None
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    assert load_shipped_surfaces(spec, tmp_path / "bad.npz") is None
+
+
+def test_importing_the_fuzzy_weights_does_not_import_skfuzzy():
+    """skfuzzy (and the scipy it pulls in) costs ~0.2 s of every MPC and CLI start; only the
+    Mamdani computation and the test oracle import it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import fourws_mpc.core.fuzzy_weights as f; f.FuzzyWeights(); "
+            "print('skfuzzy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=_source_env())
+    assert out.stdout.strip() == "False"
+
+
+def _source_env() -> dict:
+    import os
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[2] / "src" / "fourws_mpc"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(src), env.get("PYTHONPATH", "")]))
+    return env

@@ -121,6 +121,15 @@ def test_draw_figures_writes_every_figure_as_png(tmp_path):
     assert all(p.parent == tmp_path / "plots" and _is_png(p) for p in paths)
 
 
+def test_figures_drawn_by_two_processes_are_the_same_files(tmp_path):
+    """``workers=2`` (``fourws run``) draws half of the figures in a forked process: the
+    same paths in the same order and the same bytes as one process draws."""
+    one = draw_figures(make_run(), tmp_path / "one")
+    two = draw_figures(make_run(), tmp_path / "two", workers=2)
+    assert [p.name for p in one] == [p.name for p in two]
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(one, two, strict=True))
+
+
 def test_no_horizon_figure_without_diagnostics(tmp_path):
     paths = draw_figures(make_run(with_diagnostics=False), tmp_path)
     assert "horizons_weights.png" not in {p.name for p in paths}

@@ -68,7 +68,8 @@ class InfoTaker:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop the thread (after the batch it is taking) and destroy the subscriptions."""
+        """Stop the thread (after the batch it is taking), hand every message still queued to
+        its handler, and destroy the subscriptions."""
         self._stop.set()
         try:
             self._wake.trigger_guard_condition()
@@ -78,6 +79,12 @@ class InfoTaker:
             self._thread.join()
         with self._lock:
             subs, self._subs = self._subs, []
+        if not self._thread.is_alive():  # what arrived after the thread's last batch
+            for sub, handler in subs:
+                try:
+                    self._take_all(sub, handler, final=True)
+                except Exception:  # noqa: BLE001 - the context may be gone already
+                    break
         for sub, _ in subs:
             for event_handler in sub.event_handlers:
                 self._node.remove_waitable(event_handler)
@@ -106,8 +113,8 @@ class InfoTaker:
             if not self._stop.is_set() and self._node.context.ok():
                 self.error = exc
 
-    def _take_all(self, sub: Subscription, handler: Handler) -> None:
-        while not self._stop.is_set():
+    def _take_all(self, sub: Subscription, handler: Handler, final: bool = False) -> None:
+        while final or not self._stop.is_set():
             with sub.handle:
                 taken = sub.handle.take_message(sub.msg_type, True)
             if taken is None:

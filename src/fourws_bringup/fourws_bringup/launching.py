@@ -27,6 +27,7 @@ from launch.actions import (
     LogInfo,
     OpaqueFunction,
     RegisterEventHandler,
+    SetEnvironmentVariable,
 )
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
@@ -37,7 +38,7 @@ from fourws_common.exit_codes import describe
 
 from .core.conditions import IDEAL, load_condition
 from .runner import COMPOSE_LAYOUTS, RunError, control_specs, graph_specs
-from .supervisor import NodeSpec
+from .supervisor import NodeSpec, dds_environment
 
 TRUE, FALSE = ("true", "1", "yes", "on"), ("false", "0", "no", "off")
 
@@ -132,8 +133,11 @@ def _controllers(context: LaunchContext) -> list[Any]:
     return [launch_node(s) for s in specs]
 
 
-def _common_arguments() -> list[DeclareLaunchArgument]:
+def _common_arguments() -> list[Any]:
+    """The arguments both launch files take, after the Fast DDS profiles every fourws node
+    gets (``supervisor.dds_environment``: none if the environment names a file)."""
     return [
+        *[SetEnvironmentVariable(k, v) for k, v in dds_environment().items()],
         DeclareLaunchArgument("controller", default_value="improved", description=(
             "controller preset name (mpc_fws, mpc_4ws, improved, ampc_4ws, ampc_4ws_dyc, "
             "lqr_ff) or a preset YAML path")),

@@ -40,7 +40,9 @@ not raise the event (a run missing 1965 messages was reported as 1 lost).
 
 Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
 arrived for ``drain_quiet_s`` *and* no writer is left matched on a per-step topic (at most
-``drain_max_s``), then ends, and ``destroy_node``
+``drain_max_s``), or, at once, until no writer is left matched on any recorded topic (the
+supervisor stops the recorder after every node it records: nothing more can come), then
+ends, and ``destroy_node`` takes what is still queued (:meth:`InfoTaker.stop`),
 finalises the file (last chunk, summary, footer) and writes the final ``metadata.yaml``,
 exactly once (also when rclpy shuts down first). A writer stopped at the same time
 (``ros2 launch`` signals every process at once) waits for its last samples to be
@@ -158,7 +160,8 @@ class RecorderConfig:
                                   unit="bytes")
     compression: str = param("zstd", "chunk compression", choices=("zstd", "lz4", "none"))
     drain_quiet_s: float = param(0.3, "after a stop request, end once no message has come "
-                                 "for this long", lo=0.0, hi=10.0, unit="s")
+                                 "for this long (at once when no writer is left on any "
+                                 "recorded topic)", lo=0.0, hi=10.0, unit="s")
     drain_max_s: float = param(3.0, "after a stop request, end after this long at most (more "
                                "than a writer's wait for its acknowledgements, 2 s)",
                                lo=0.0, hi=60.0, unit="s")
@@ -383,7 +386,10 @@ class RecorderNode(Node):
         now = time.monotonic()
         quiet = now - max(self._last_rx, self._stop_requested_at) >= cfg.drain_quiet_s
         writers = [t for t in self._drain_waits if self.matched.get(t, 0) > 0]
-        if quiet and not writers:
+        # no writer left on any topic: every sample they sent is acknowledged, so queued
+        # here (destroy_node takes the last ones); waiting for quiet would add nothing
+        alone = not any(self.matched.values())
+        if alone or (quiet and not writers):
             self.done = True
         elif now - self._stop_requested_at >= cfg.drain_max_s:
             self.done = True

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -227,32 +227,113 @@ def _legend(ax, n_runs: int) -> None:
         ax.legend(fontsize=8)
 
 
-def _draw(runs: Sequence[tuple[str, Series]], out_dir: Path, prefix: str, title: str,
-          maxima: Mapping[str, float]) -> list[Path]:
+def _draw_overview(runs: Sequence[tuple[str, Series]], path: Path, title: str) -> Path:
     plt = _plt()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths: list[Path] = []
     fig, axes = plt.subplots(2, 3, figsize=(15, 8))
     for ax, (_name, draw) in zip(axes.flat, PANELS, strict=True):
         draw(ax, runs)
         _legend(ax, len(runs))
     fig.suptitle(title)
     fig.tight_layout()
-    paths.append(_save(fig, out_dir / f"{prefix}overview.png"))
+    return _save(fig, path)
+
+
+def _draw_panel(runs: Sequence[tuple[str, Series]], path: Path, title: str, draw) -> Path:
+    fig, ax = _plt().subplots(figsize=(7, 4))
+    draw(ax, runs)
+    _legend(ax, len(runs))
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+@dataclass(frozen=True)
+class _Figure:
+    """One figure file and the call that draws and saves it (each figure is drawn on its
+    own, so any split of them between processes gives the same files); ``cost``: its
+    drawing time relative to a one-panel figure."""
+
+    path: Path
+    draw: Callable[[], Path]
+    cost: float = 1.0
+
+
+def _figure_jobs(runs: Sequence[tuple[str, Series]], out_dir: Path, prefix: str, title: str,
+                 maxima: Mapping[str, float]) -> list[_Figure]:
+    """Every figure of :func:`_draw`, in the order of its returned paths."""
+    jobs: list[_Figure] = []
+
+    def job(name: str, cost: float, fn: Callable[..., Path], *args) -> None:
+        path = out_dir / f"{prefix}{name}.png"
+        jobs.append(_Figure(path, lambda: fn(runs, path, *args), cost))
+
+    job("overview", 4.0, _draw_overview, title)
     for name, draw in PANELS:
-        fig, ax = plt.subplots(figsize=(7, 4))
-        draw(ax, runs)
-        _legend(ax, len(runs))
-        fig.suptitle(title, fontsize=9)
-        fig.tight_layout()
-        paths.append(_save(fig, out_dir / f"{prefix}{name}.png"))
+        job(name, 1.0, _draw_panel, title, draw)
     adaptive = [(label, s) for label, s in runs if len(s.diagnostics.get("stamp_ns", ()))
                 and "np" in s.diagnostics]
     if adaptive:
-        paths.append(_draw_adaptive(adaptive, out_dir / f"{prefix}horizons_weights.png",
-                                    title, maxima))
-    paths.append(_draw_torques(runs, out_dir / f"{prefix}wheel_torques.png", title))
-    return paths
+        job("horizons_weights", 2.0, lambda _runs, path: _draw_adaptive(adaptive, path, title,
+                                                                        maxima))
+    job("wheel_torques", 1.5, _draw_torques, title)
+    return jobs
+
+
+def _split(jobs: Sequence[_Figure]) -> tuple[list[_Figure], list[_Figure]]:
+    """Two groups of about equal cost (the costliest first, each to the lighter group)."""
+    groups: tuple[list[_Figure], list[_Figure]] = ([], [])
+    for job in sorted(jobs, key=lambda j: -j.cost):
+        min(groups, key=lambda g: sum(j.cost for j in g)).append(job)
+    return groups
+
+
+def _draw(runs: Sequence[tuple[str, Series]], out_dir: Path, prefix: str, title: str,
+          maxima: Mapping[str, float], workers: int = 1) -> list[Path]:
+    _plt()  # before a fork: the child starts with matplotlib loaded
+    out_dir.mkdir(parents=True, exist_ok=True)
+    jobs = _figure_jobs(runs, out_dir, prefix, title, maxima)
+    mine, theirs = _split(jobs) if workers > 1 and len(jobs) > 1 else (jobs, [])
+    child = _fork_figures(theirs) if theirs else None
+    if theirs and child is None:  # no fork here: all in this process
+        mine, theirs = jobs, []
+    try:
+        for job in mine:
+            job.draw()
+    finally:
+        failed = child is not None and _wait_figures(child)
+    if failed:  # the forked group did not finish: draw it here (same files)
+        for job in theirs:
+            job.draw()
+    return [job.path for job in jobs]
+
+
+def _fork_figures(jobs: Sequence[_Figure]) -> int | None:
+    """Draw ``jobs`` in a forked child process (the other core); its pid, or None where
+    there is no fork (the caller draws them then)."""
+    if not hasattr(os, "fork"):
+        return None
+    try:
+        pid = os.fork()
+    except OSError:
+        return None
+    if pid:
+        return pid
+    code = 1  # the child: draw, then leave at once (nothing of the parent's to tear down)
+    try:
+        for job in jobs:
+            job.draw()
+        code = 0
+    finally:
+        os._exit(code)
+
+
+def _wait_figures(pid: int) -> bool:
+    """Wait for the child of :func:`_fork_figures`; True if it failed."""
+    try:
+        _, status = os.waitpid(pid, 0)
+    except ChildProcessError:
+        return True
+    return not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0)
 
 
 def _draw_adaptive(runs: Sequence[tuple[str, Series]], path: Path, title: str,
@@ -314,18 +395,21 @@ def _draw_torques(runs: Sequence[tuple[str, Series]], path: Path, title: str) ->
 # ---------------------------------------------------------------------------------------------
 def draw_figures(run: RunData, out_dir: str | Path, *, title: str | None = None,
                  q_y_max: float = 8000.0, q_phi_max: float = 5000.0,
-                 r_ddelta_max: float = 80000.0, r_dmz_max: float = 60000.0) -> list[Path]:
+                 r_ddelta_max: float = 80000.0, r_dmz_max: float = 60000.0,
+                 workers: int = 1) -> list[Path]:
     """All figures of one run as PNG files in ``out_dir`` (created); returns their paths.
 
     ``overview.png`` (Fig. 5/7 panels a-f), ``trajectory.png``, ``lateral_error.png``,
     ``heading_error.png``, ``heading.png``, ``sideslip.png``, ``yaw_rate.png``,
     ``horizons_weights.png`` (Fig. 6, when MPC diagnostics were recorded) and
-    ``wheel_torques.png``. The ``*_max`` are the weight maxima of eq. (23).
+    ``wheel_torques.png``. The ``*_max`` are the weight maxima of eq. (23). ``workers=2``
+    draws half of them in a forked process (``fourws run``: ~1.2 s of drawing on one core;
+    the files are the same), for a caller that holds no lock or thread a child could need.
     """
     label = run.controller or "vehicle"
     title = title or " / ".join(x for x in (run.controller, run.scenario) if x) or str(run.path)
     maxima = {"q_y": q_y_max, "q_phi": q_phi_max, "r_ddelta": r_ddelta_max, "r_dmz": r_dmz_max}
-    return _draw([(label, series_of(run))], Path(out_dir), "", title, maxima)
+    return _draw([(label, series_of(run))], Path(out_dir), "", title, maxima, workers)
 
 
 def draw_comparison(runs: Mapping[str, RunData], out_dir: str | Path, title: str, *,

@@ -100,12 +100,14 @@ def write_metrics(folder: Path, metrics: Mapping) -> Path:
 
 
 def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
-              controller: str | None = None) -> dict:
+              controller: str | None = None, run: RunData | None = None) -> dict:
     """metrics.json content for a run folder or bag, computed from the bag alone.
 
-    ``outcome`` adds what only the live run knows (wall time, a node that died).
+    ``outcome`` adds what only the live run knows (wall time, a node that died); ``run``:
+    the bag at ``path`` already read (:func:`read_run`), so a caller that also plots it reads
+    it once.
     """
-    run = read_run(path)
+    run = read_run(path) if run is None else run
     m = bag_metrics(run)
     # The plant's final status: from its status file (outcome) when the live run has one,
     # else as recorded in the bag.

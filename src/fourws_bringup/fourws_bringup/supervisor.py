@@ -18,6 +18,14 @@ remappings. All nodes of a graph share one ``ROS_DOMAIN_ID`` with discovery kept
   the nodes it records, so every reliable sample they sent can still be re-sent to it and
   acknowledged while they exit; see ``fourws_common.node_main``). Children also get
   ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
+
+Every node gets the Fast DDS profiles of ``fourws_bringup/config/fastdds_profiles.xml``
+(:func:`dds_environment`, unless the environment names a profiles file of its own): more
+participant announcements, so two processes do not miss each other until the next periodic
+one (3 s by default), and a 100 ms heartbeat for reliable writers, so waiting for a last
+sample's acknowledgement at the end of a run or at a stop takes milliseconds instead of
+1.5 s on average (the file says why). Every node also gets ``FOURWS_FAST_EXIT=1``: it ends
+with ``os._exit`` once its clean-up is done (:mod:`fourws_common.node_main`).
 """
 
 from __future__ import annotations
@@ -39,6 +47,28 @@ import yaml
 
 DOMAIN_LOCK_DIR = Path(os.environ.get("FOURWS_DOMAIN_LOCK_DIR", "/tmp"))
 DOMAIN_RANGE = range(1, 101)
+#: The variable through which Fast DDS 2.x (Jazzy's) finds a profiles file; a user's
+#: profiles file under either name (3.x reads the second) is kept.
+DDS_PROFILES_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
+USER_PROFILES_ENV = (DDS_PROFILES_ENV, "FASTDDS_DEFAULT_PROFILES_FILE")
+DDS_PROFILES_FILE = "fastdds_profiles.xml"
+
+
+def dds_environment(environ: dict[str, str] | None = None) -> dict[str, str]:
+    """The variables that give the nodes fourws's Fast DDS profiles (module docstring):
+    none when ``environ`` (default ``os.environ``) names a profiles file already (the user's
+    own wins) or the file cannot be found."""
+    environ = os.environ if environ is None else environ
+    if any(environ.get(k) for k in USER_PROFILES_ENV):
+        return {}
+    try:
+        from fourws_common.resources import config_dir
+
+        path = config_dir("fourws_bringup") / DDS_PROFILES_FILE
+    except Exception:  # noqa: BLE001 - no installed share: the middleware's defaults
+        return {}
+    return {DDS_PROFILES_ENV: str(path)} if path.is_file() else {}
+
 
 
 class SupervisorError(RuntimeError):
@@ -296,9 +326,12 @@ class Supervisor:
         self.log_dir = Path(log_dir)
         self.env = dict(os.environ)
         self.env.update(env or {})
+        self.env.update(dds_environment(self.env))
         self.env["ROS_DOMAIN_ID"] = str(domain_id)
         self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         self.env["PYTHONUNBUFFERED"] = "1"
+        # os._exit once a node's clean-up is done (fourws_common.node_main, "Exit")
+        self.env.setdefault("FOURWS_FAST_EXIT", "1")
         self.env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "0")
         self.procs: dict[str, _Proc] = {}
         self._ctx = None

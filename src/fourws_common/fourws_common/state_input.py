@@ -16,8 +16,9 @@ Each state goes through, in this order:
 5. the node's outputs must be matched (lockstep, ``wait_for_subscribers``, until the first
    answer of a run): the first state is not answered until the node's ``outputs``
    publishers have matched that many subscriptions in total, so a subscriber that joined
-   last (the recorder) gets step 0 too; the lockstep plant publishes the waiting state
-   again, and it is answered then;
+   last (the recorder) gets step 0 too; the newest state that waited is answered as soon
+   as they have (checked every ``MATCH_RETRY_PERIOD_S``; before, the run waited for the
+   plant to publish it again, 0.25 s later);
 6. the node's step; an exception in it is caught, logged with the state, and answered with
    the node's held output. A callback never kills the node.
 """
@@ -29,6 +30,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
@@ -45,6 +47,9 @@ from fourws_common.qos import LATEST_QOS
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import VEHICLE_STATE
 from fourws_msgs.msg import VehicleState
+
+#: Wall period (s, steady clock) at which a state held back for unmatched outputs is retried.
+MATCH_RETRY_PERIOD_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,9 @@ class StateInput:
         self._outputs_matched = False  # checked until the first answer of a run only
         self._checked = tuple(checked)
         self._core_name = core_name
-        self._waiting: Any = None  # the newest plausible state that came before a reference
+        # the newest plausible state that came before a reference or the outputs' matches
+        self._waiting: Any = None
+        self._match_timer = None  # retries the waiting state until the outputs have matched
         self._last_input: float | None = None  # steady time of the newest state received
         self.gate = StampGate(MAX_STAMP_JUMP_NS)
         self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
@@ -98,6 +105,16 @@ class StateInput:
         msg, self._waiting = self._waiting, None
         if msg is not None and self._h.ready():
             self._on_state(msg)
+
+    def _retry_matched(self) -> None:
+        """The timer of a state held back for unmatched outputs: answer it once they have
+        matched (the timer ends then, or when no state waits any more)."""
+        if self._waiting is not None and self._unmatched():
+            return
+        self._match_timer.cancel()
+        self._node.destroy_timer(self._match_timer)
+        self._match_timer = None
+        self.retry_waiting()
 
     def _unmatched(self) -> list[str]:
         """Output topics with fewer matched subscriptions than their count (lockstep), until
@@ -139,6 +156,11 @@ class StateInput:
             self._match_log(stamp_ns, f"waiting for {self.inputs.config.wait_for_subscribers} "
                             f"matched subscriptions in all on {', '.join(unmatched)}: not "
                             "answering states yet")
+            self._waiting = msg
+            if self._match_timer is None:
+                self._match_timer = self._node.create_timer(
+                    MATCH_RETRY_PERIOD_S, self._retry_matched,
+                    clock=Clock(clock_type=ClockType.STEADY_TIME))
             return
         prev_ns = self.gate.last_ns
         verdict = self.gate.check(stamp_ns)

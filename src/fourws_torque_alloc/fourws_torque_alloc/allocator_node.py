@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass, fields
 
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from fourws_common.conversions import RateLimitedLog, stamp_to_ns
@@ -39,6 +40,7 @@ from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import LATEST_QOS, qos_of
 from fourws_common.ros_params import ParamBinding
+from fourws_common.state_input import MATCH_RETRY_PERIOD_S
 from fourws_common.topics import (
     DRIVE_COMMAND,
     MPC_COMMAND,
@@ -96,6 +98,7 @@ class AllocatorNode(Node):
             None if self._last_input is None else time.monotonic() - self._last_input,
             VEHICLE_STATE.name))
         self._match_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
+        self._match_timer = None  # retries held inputs until the outputs have matched
         self.pub = self.create_publisher(WheelTorques, WHEEL_TORQUES.ros_name,
                                          qos_of(WHEEL_TORQUES))
         self._out_msg = WheelTorques()  # refilled whole every step; also the cached answer
@@ -181,18 +184,41 @@ class AllocatorNode(Node):
         store[stamp_ns] = msg
         if len(store) > MAX_HELD:  # strays that no state will ever match
             del store[min(store)]
-        if (stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs
-                and self._outputs_matched()):
-            self._answer(stamp_ns, self.states.pop(stamp_ns), self.drives.pop(stamp_ns),
-                         self.mpcs.pop(stamp_ns))
-            for d in (self.states, self.drives, self.mpcs):
-                for k in [k for k in d if k <= stamp_ns]:
-                    del d[k]
+        self._answer_held(stamp_ns)
+
+    def _answer_held(self, stamp_ns: int) -> None:
+        """Answer ``stamp_ns`` if all three inputs for it are held and the outputs matched."""
+        if not (stamp_ns in self.states and stamp_ns in self.drives and stamp_ns in self.mpcs):
+            return
+        if not self._outputs_matched():
+            if self._match_timer is None:
+                self._match_timer = self.create_timer(
+                    MATCH_RETRY_PERIOD_S, self._retry_matched,
+                    clock=Clock(clock_type=ClockType.STEADY_TIME))
+            return
+        self._answer(stamp_ns, self.states.pop(stamp_ns), self.drives.pop(stamp_ns),
+                     self.mpcs.pop(stamp_ns))
+        for d in (self.states, self.drives, self.mpcs):
+            for k in [k for k in d if k <= stamp_ns]:
+                del d[k]
+
+    def _retry_matched(self) -> None:
+        """The timer of inputs held for unmatched outputs: answer the newest complete stamp
+        once the outputs have matched (or stop when nothing is held complete any more)."""
+        complete = [k for k in self.states if k in self.drives and k in self.mpcs]
+        if complete and not self._outputs_matched():
+            return
+        self._match_timer.cancel()
+        self.destroy_timer(self._match_timer)
+        self._match_timer = None
+        if complete:
+            self._answer_held(max(complete))
 
     def _outputs_matched(self) -> bool:
         """Lockstep, until the first answer of a run: /control/wheel_torques has matched
         ``wait_for_subscribers`` subscriptions (a subscriber that leaves mid-run never
-        stalls the allocator). Held inputs wait; the plant's republished state retries."""
+        stalls the allocator). Held inputs wait and are answered as soon as it has (checked
+        every ``MATCH_RETRY_PERIOD_S``; the plant's republished state retries too)."""
         need = self.params.config.wait_for_subscribers
         if self.last_stamp_ns is not None or not need:
             return True

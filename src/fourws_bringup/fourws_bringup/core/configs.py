@@ -15,14 +15,17 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fourws_common.input_guard import InputConfig
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
-from fourws_mpc.core.config import MpcConfig
-from fourws_torque_alloc.core.allocation import AllocatorConfig
-from fourws_torque_alloc.core.pid import SpeedPidConfig
+
+if TYPE_CHECKING:  # imported where loaded: the MPC's pulls in numba, osqp and scipy (~0.5 s
+    # of every `fourws` start, which mostly only needs the file lists)
+    from fourws_mpc.core.config import MpcConfig
+    from fourws_torque_alloc.core.allocation import AllocatorConfig
+    from fourws_torque_alloc.core.pid import SpeedPidConfig
 
 #: node name -> (package, params file in its config/)
 PACKAGE_FILES: dict[str, tuple[str, str]] = {
@@ -119,6 +122,8 @@ def core_values(values: dict[str, Any]) -> dict[str, Any]:
 
 def load_mpc_config(controller: str, overrides: dict[str, Any] | None = None) -> MpcConfig:
     """mpc.yaml with the preset's ``mpc_node`` section (and ``overrides``) merged over it."""
+    from fourws_mpc.core.config import MpcConfig
+
     return MpcConfig.from_mapping(core_values(node_values("mpc_node", controller, overrides)))
 
 
@@ -126,12 +131,16 @@ def load_allocator_config(controller: str | None,
                           overrides: dict[str, Any] | None = None) -> AllocatorConfig:
     """allocator.yaml with the preset's ``allocator_node`` section (the file alone for
     ``None``) and ``overrides`` merged over it."""
+    from fourws_torque_alloc.core.allocation import AllocatorConfig
+
     return from_mapping(AllocatorConfig, core_values(node_values("allocator_node",
                                                                  controller, overrides)))
 
 
 def load_pid_config() -> SpeedPidConfig:
     """speed_pid.yaml."""
+    from fourws_torque_alloc.core.pid import SpeedPidConfig
+
     return from_mapping(SpeedPidConfig, core_values(node_values("speed_pid_node")))
 
 

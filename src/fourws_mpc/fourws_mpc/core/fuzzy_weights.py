@@ -17,20 +17,34 @@ exact centroid of the sampled piecewise-linear aggregate, as ``skfuzzy.defuzz``)
 Membership functions are built with ``skfuzzy.trimf``.
 
 Online evaluation: Mamdani inference costs ~20 ms per output in
-``skfuzzy.control.ControlSystemSimulation``, so the four response surfaces are computed once
-at start-up on a grid with a vectorised Mamdani evaluation and interpolated bilinearly online
-(inputs clipped to the universes); all four ratios take a few microseconds. The weights are
+``skfuzzy.control.ControlSystemSimulation``, so the four response surfaces are tabulated on a
+grid with a vectorised Mamdani evaluation and interpolated bilinearly online (inputs clipped to
+the universes); all four ratios take a few microseconds. The weights are
 eq. (23): Q_Y = r_QY Q_Y,max, Q_φ = r_Qφ Q_φ,max, R_Δδ = r_RΔδ R_Δδ,max, R_ΔMz = r_RΔMz R_ΔMz,max.
+
+Shipped surfaces: the default :class:`FuzzySpec`'s surfaces are package data
+(``fourws_mpc/data/fuzzy_surfaces.npz``, :data:`SHIPPED_SURFACES`), loaded in about a
+millisecond instead of computed at every MPC start (~0.3 s, more while the other nodes start,
+plus ~0.2 s to import ``skfuzzy``, which is now imported only by :func:`mamdani` and the
+test oracle). The file holds the surfaces and a fingerprint of everything they depend on (the
+spec, the sets and the rule tables, :func:`surfaces_fingerprint`); a file whose fingerprint
+differs is ignored and the surfaces are computed, so it can never be silently stale
+(``tests/unit/test_mpc_fuzzy.py`` also checks it against :func:`mamdani` to 1e-12).
+After changing the sets, the rule tables or the default spec, regenerate it with
+
+    python -m fourws_mpc.core.fuzzy_weights --write
+
+(from ``src/fourws_mpc``, or anywhere with the package importable; then ``make setup``).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
+from pathlib import Path
 
 import numpy as np
-import skfuzzy
 
 IN_LABELS = ("NB", "NS", "ZO", "PS", "PB")
 OUT_LABELS = ("ZO", "PS", "PM", "PB")
@@ -115,6 +129,8 @@ def mamdani(e_y: np.ndarray, e_phi_deg: np.ndarray, spec: FuzzySpec | None = Non
     sets_y, sets_p = spec.input_sets()
     ey = np.clip(np.asarray(e_y, float), -spec.e_y_range_m, spec.e_y_range_m)
     ep = np.clip(np.asarray(e_phi_deg, float), -spec.e_phi_range_deg, spec.e_phi_range_deg)
+    import skfuzzy  # here, not at module level: its import costs ~0.2 s (module docstring)
+
     shape = np.broadcast_shapes(ey.shape, ep.shape)
     ey = np.broadcast_to(ey, shape).reshape(-1)
     ep = np.broadcast_to(ep, shape).reshape(-1)
@@ -141,14 +157,65 @@ def surface_grid(spec: FuzzySpec) -> tuple[np.ndarray, np.ndarray]:
             np.linspace(-spec.e_phi_range_deg, spec.e_phi_range_deg, spec.grid_phi))
 
 
+#: The default spec's response surfaces as package data (module docstring).
+SHIPPED_SURFACES = Path(__file__).resolve().parent.parent / "data" / "fuzzy_surfaces.npz"
+
+
+def surfaces_fingerprint(spec: FuzzySpec) -> str:
+    """Everything the response surfaces of ``spec`` depend on, as text: the spec, the input
+    and output sets, the labels and the rule tables (a shipped table is used only for the
+    same fingerprint)."""
+    def sets(triangles: list) -> tuple:  # plain floats: the text is numpy's repr-free
+        return tuple(tuple(float(v) for v in abc) for abc in triangles)
+
+    return repr((astuple(spec), *(sets(s) for s in spec.input_sets()), sets(OUT_SETS),
+                 IN_LABELS, OUT_LABELS, OUTPUT_NAMES,
+                 tuple((k, RULE_TABLES[k]) for k in OUTPUT_NAMES)))
+
+
+def compute_surfaces(spec: FuzzySpec) -> np.ndarray:
+    """The four ratios of :func:`mamdani` on the spec's (grid_y × grid_phi) grid, shape
+    (4, ny, nφ) (~0.3 s for the default spec)."""
+    EY, EP = np.meshgrid(*surface_grid(spec), indexing="ij")
+    return mamdani(EY, EP, spec)
+
+
+def load_shipped_surfaces(spec: FuzzySpec, path: Path = SHIPPED_SURFACES) -> np.ndarray | None:
+    """The surfaces of ``spec`` from the shipped file, or None when the file is missing,
+    unreadable, or was made for another fingerprint (:func:`surfaces_fingerprint`)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if str(data["fingerprint"]) != surfaces_fingerprint(spec):
+                return None
+            surfaces = np.array(data["surfaces"], dtype=float)
+    except (OSError, KeyError, ValueError):
+        return None
+    expected = (len(OUTPUT_NAMES), spec.grid_y, spec.grid_phi)
+    return surfaces if surfaces.shape == expected else None
+
+
+def write_shipped_surfaces(path: Path = SHIPPED_SURFACES, spec: FuzzySpec | None = None) -> Path:
+    """Compute the default spec's surfaces and write them with their fingerprint to ``path``
+    (the package data file by default); returns ``path``."""
+    spec = spec if spec is not None else FuzzySpec()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, surfaces=compute_surfaces(spec),
+                            fingerprint=np.array(surfaces_fingerprint(spec)))
+    return path
+
+
 @functools.lru_cache(maxsize=8)
 def response_surfaces(spec: FuzzySpec) -> np.ndarray:
     """The four ratios of :func:`mamdani` on the spec's (grid_y × grid_phi) grid, shape
-    (4, ny, nφ), read-only. Cached per spec (a frozen dataclass): every controller built in a
-    process with the same spec shares one surface (building it costs ~0.2 s; a sweep builds
-    a controller per run)."""
-    EY, EP = np.meshgrid(*surface_grid(spec), indexing="ij")
-    surfaces = mamdani(EY, EP, spec)
+    (4, ny, nφ), read-only: the shipped table when it was made for this spec
+    (:func:`load_shipped_surfaces`), else computed (:func:`compute_surfaces`). Cached per
+    spec (a frozen dataclass): every controller built in a process with the same spec
+    shares one surface (a sweep builds a controller per run)."""
+    surfaces = load_shipped_surfaces(spec)
+    if surfaces is None:
+        surfaces = compute_surfaces(spec)
     surfaces.flags.writeable = False
     return surfaces
 
@@ -185,6 +252,7 @@ def skfuzzy_control_system(spec: FuzzySpec | None = None, in_points: int = 161):
 
     Returns ``(system, consequent_names)``; inputs are named ``e_y`` (m) and ``e_phi`` (deg).
     """
+    import skfuzzy
     from skfuzzy import control as ctrl
 
     spec = spec if spec is not None else FuzzySpec()
@@ -209,3 +277,33 @@ def skfuzzy_control_system(spec: FuzzySpec | None = None, in_points: int = 161):
             for j, lab in enumerate(row):
                 rules.append(ctrl.Rule(ep[IN_LABELS[i]] & ey[IN_LABELS[j]], outs[name][lab]))
     return ctrl.ControlSystem(rules), OUTPUT_NAMES
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m fourws_mpc.core.fuzzy_weights --write [PATH]``: regenerate the shipped
+    surfaces (:func:`write_shipped_surfaces`); ``--check``: exit 1 if the shipped file is not
+    the default spec's surfaces (to 1e-12)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m fourws_mpc.core.fuzzy_weights",
+                                 description="the shipped fuzzy response surfaces")
+    ap.add_argument("--write", action="store_true", help="compute and write the file")
+    ap.add_argument("--check", action="store_true", help="compare the file with mamdani()")
+    ap.add_argument("path", nargs="?", type=Path, default=SHIPPED_SURFACES)
+    args = ap.parse_args(argv)
+    spec = FuzzySpec()
+    if args.write:
+        print(f"wrote {write_shipped_surfaces(args.path, spec)}")
+    if args.check or not args.write:
+        shipped = load_shipped_surfaces(spec, args.path)
+        if shipped is None:
+            print(f"{args.path}: missing or made for another spec, sets or rule tables")
+            return 1
+        err = float(np.abs(shipped - compute_surfaces(spec)).max())
+        print(f"{args.path}: largest difference to mamdani() {err:.3g}")
+        return 0 if err <= 1e-12 else 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
