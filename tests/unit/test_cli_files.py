@@ -123,6 +123,52 @@ def test_run_with_a_scenario_yaml_syntax_error_is_one_line_and_exit_2(tmp_path, 
     assert not (tmp_path / "out").exists()
 
 
+GOOD_PRESET = """/**/mpc_node:
+  ros__parameters:
+    controller: mine
+    use_rear_steer: true
+/**/allocator_node:
+  ros__parameters:
+    method: equal
+"""
+#: a bad preset and a word its one-line error must hold (issue 41, item 4)
+BAD_PRESETS = {
+    "typo_key": (GOOD_PRESET.replace("use_rear_steer", "use_rear_steeer"), "use_rear_steeer"),
+    "wrong_type": (GOOD_PRESET.replace("use_rear_steer: true", "use_rear_steer: maybe"),
+                   "use_rear_steer"),
+    "out_of_range": (GOOD_PRESET.replace("use_rear_steer: true", "np_baseline: -3"),
+                     "np_baseline"),
+    "allocator_key": (GOOD_PRESET.replace("method: equal", "method: nosuch"), "method"),
+    "syntax": (GOOD_PRESET.replace("method: equal", "method: [equal"), "YAML syntax error"),
+    "empty": ("", "no mpc_node parameters"),
+    "other_node": (GOOD_PRESET + "/**/plant_node:\n  ros__parameters:\n    dt_s: 0.02\n",
+                   "plant_node"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_PRESETS)
+def test_a_bad_controller_preset_is_one_line_and_exit_2_before_any_node(tmp_path, capsys,
+                                                                       case):
+    text, word = BAD_PRESETS[case]
+    bad = tmp_path / "mine.yaml"
+    bad.write_text(text)
+    code = cli.main(["run", "--scenario", "dlc_60_mu05", "--controller", str(bad),
+                     "--out", str(tmp_path / "out")])
+    assert code == 2
+    line = one_error_line(capsys, "fourws run: controller preset ")
+    assert word in line and "mine.yaml" in line
+    assert not (tmp_path / "out").exists()             # refused before the run folder
+
+
+def test_every_shipped_preset_passes_the_preset_check():
+    from fourws_bringup.core.configs import check_preset, list_controllers
+
+    good = Path(os.environ.get("TMPDIR", "/tmp")) / "fourws_good_preset_check.yaml"
+    good.write_text(GOOD_PRESET)
+    for name in [*list_controllers(), str(good)]:
+        check_preset(name)
+
+
 @pytest.mark.parametrize("command", ["run", "paper"])
 @pytest.mark.parametrize("place", ["file", "unwritable"])
 def test_out_that_is_a_file_or_cannot_be_written_is_one_line_and_exit_2(tmp_path, capsys,

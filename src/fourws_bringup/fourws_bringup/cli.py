@@ -41,10 +41,16 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     from fourws_common.exit_codes import ExitCode
     from fourws_sim.core.scenario import load_scenario
 
+    from .core.configs import check_preset
     from .runner import RunError, controller_preset, prepare_out_dir, run_graph
     from .scoring import score_run, write_metrics
 
     controller_preset(controller)
+    try:
+        check_preset(controller)
+    except ValueError as exc:
+        why = str(exc).removeprefix(f"{Path(controller)}: ")   # the file is named once
+        raise RunError(f"controller preset '{controller}': {why}") from None
     try:
         sc = load_scenario(scenario)
     except (ValueError, FileNotFoundError) as exc:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fourws_common.input_guard import InputConfig
-from fourws_common.params import from_mapping, load_ros_params_yaml
+from fourws_common.params import from_mapping, load_ros_params_yaml, read_yaml_file
 from fourws_common.resources import config_dir
 
 if TYPE_CHECKING:  # imported where loaded: the MPC's pulls in numba, osqp and scipy (~0.5 s
@@ -91,6 +91,33 @@ def package_file(node: str) -> Path:
     """The package params file of ``node``."""
     package, name = PACKAGE_FILES[node]
     return config_dir(package) / name
+
+
+def check_preset(name_or_path: str) -> None:
+    """Refuse a controller preset that a node would refuse, before any node starts: a file
+    that is not YAML or not a mapping, a section for another node than
+    :data:`PRESET_NODES`, no ``mpc_node`` parameters, or a key, type or value the nodes'
+    configs reject (``ValueError``, one line naming the file and the key)."""
+    path = controller_preset_path(name_or_path)
+    data = read_yaml_file(path) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected node sections (/**/mpc_node: ros__parameters: "
+                         f"...), got {type(data).__name__}")
+    for key, section in data.items():
+        node = str(key).rsplit("/", 1)[-1]
+        if node not in PRESET_NODES:
+            raise ValueError(f"{path}: section '{key}' is not one of the preset's nodes "
+                             f"({', '.join(PRESET_NODES)})")
+        if not isinstance(section, dict) or set(section) != {"ros__parameters"}:
+            raise ValueError(f"{path}: section '{key}' must hold ros__parameters only")
+    if not load_ros_params_yaml(str(path), "mpc_node"):
+        raise ValueError(f"{path}: no mpc_node parameters (an empty preset would run the "
+                         "defaults under this file's name)")
+    for load in (load_mpc_config, load_allocator_config):
+        try:
+            load(str(path))
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
 
 
 def params_files(node: str, controller: str | None = None) -> list[Path]:
