@@ -147,6 +147,8 @@ def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
     m = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert r.returncode == ExitCode.ABORTED == m["exit_code"], r.stderr[-2000:]
     assert m["reason"].startswith("aborted") and "died" not in m
+    assert m["scenario_file"].endswith("scenarios/dlc_60_mu05.yaml")
+    assert len(m["scenario_sha256"]) == 64
 
 
 def test_unknown_and_mistyped_params_file_keys_are_errors_naming_them(graph, tmp_path):

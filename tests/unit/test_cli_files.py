@@ -364,3 +364,21 @@ def test_recover_of_a_bare_mcap_still_writes_file_recovered_beside_it(tmp_path, 
     assert read_run(fixed).steps > 0 and bare.is_file()
     with pytest.raises(Exception):  # noqa: B017 - the cut file itself is left as it was
         read_run(bare)
+
+
+def test_metrics_name_the_scenario_file_and_its_content_hash(tmp_path):
+    """An edited copy of a shipped scenario keeps the shipped ``name:``; metrics.json tells
+    them apart by the file and a hash of its content (issue 41, item 11)."""
+    import hashlib
+
+    from fourws_bringup.scoring import scenario_record
+
+    shipped = load_scenario("dlc_60_mu05")
+    copy = tmp_path / "my_dlc.yaml"
+    copy.write_text(shipped.source.read_text(encoding="utf-8").replace("0.5", "0.45", 1))
+    edited = load_scenario(str(copy))
+    a, b = scenario_record(shipped), scenario_record(edited)
+    assert shipped.name == edited.name
+    assert a["scenario_file"].endswith("dlc_60_mu05.yaml") and b["scenario_file"] == str(copy)
+    assert a["scenario_sha256"] == hashlib.sha256(shipped.source.read_bytes()).hexdigest()
+    assert a["scenario_sha256"] != b["scenario_sha256"]

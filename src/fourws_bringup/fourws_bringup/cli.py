@@ -43,7 +43,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
 
     from .core.configs import check_preset
     from .runner import RunError, controller_preset, prepare_out_dir, run_graph
-    from .scoring import score_run, write_metrics
+    from .scoring import scenario_record, score_run, write_metrics
 
     controller_preset(controller)
     try:
@@ -74,6 +74,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         if outcome.died:
             metrics["died"] = outcome.died
             metrics["died_error"] = outcome.died_error
+    metrics.update(scenario_record(sc))
     metrics["compose"] = compose
     if namespace.strip("/"):
         metrics["namespace"] = "/" + namespace.strip("/")

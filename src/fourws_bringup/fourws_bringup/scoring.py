@@ -12,10 +12,12 @@ bags and the tools all score through here; the in-process loop uses the same
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,6 +99,18 @@ def write_metrics(folder: Path, metrics: Mapping) -> Path:
     except OSError as exc:
         raise RunError(f"cannot write {path}: {exc.strerror or exc}") from None
     return path
+
+
+def scenario_record(scenario: Any) -> dict[str, str]:
+    """The scenario file a run was given and the SHA-256 of its content (metrics.json's
+    ``scenario_file``, ``scenario_sha256``): the ``scenario`` name is the file's own
+    ``name:``, which an edited copy keeps. Empty for a scenario built without a file."""
+    source = getattr(scenario, "source", None)
+    if source is None:
+        return {}
+    path = Path(source).resolve()
+    return {"scenario_file": str(path),
+            "scenario_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
 def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
