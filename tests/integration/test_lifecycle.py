@@ -355,6 +355,26 @@ def test_a_poisoned_reference_is_rejected_and_the_node_keeps_answering(graph, ro
     sup.check()
 
 
+def test_every_node_that_takes_a_reference_refuses_the_same_bad_ones(graph, ros):
+    """A reference with two repeated points (the MPC's projection has no direction there) and
+    one with a yaw of 1e300 are refused by the MPC, the speed PID and the allocator alike:
+    one check for every node (issue 41, item 7)."""
+    nodes = ("mpc_node", "speed_pid_node", "allocator_node")
+    graph([s for s in _controllers() if s.name in nodes])
+    seen = _rejections(ros)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    assert ros.spin_until(lambda: pub_ref.get_subscription_count() >= len(nodes), 30)
+    repeated = ReferenceTrajectory(x=[0.0, 0.0], y=[0.0, 0.0], yaw=[0.0, 0.0],
+                                   curvature=[0.0, 0.0], speed=[10.0, 10.0])
+    huge_yaw = _ref_msg()
+    huge_yaw.yaw[5] = 1e300
+    for n, msg in enumerate((repeated, huge_yaw), start=1):
+        pub_ref.publish(msg)
+        assert ros.spin_until(lambda n=n: all(seen.get(node, {}).get("reference") == n
+                                              for node in nodes), 20), (n, seen)
+
+
 # -- use_sim_time ---------------------------------------------------------------------------
 def test_use_sim_time_on_every_node_gives_the_same_run(short_scenario, tmp_path):
     plain = runner.run_graph(str(short_scenario), CONTROLLER, tmp_path / "a", progress=False,

@@ -46,6 +46,7 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     pub_cmd = ros.node.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
     pub_tq = ros.node.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
     nan_step = 20
+    huge_steer_step, huge_torque_step = 30, 40        # finite but non-physical: 1e300
     first_seen: list[float] = []  # state 0 goes unanswered three times: start-up
 
     def on_state(msg: VehicleState) -> None:
@@ -55,8 +56,9 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
             first_seen.append(time.monotonic())
             if len(first_seen) <= 3:
                 return
-        cmd = MpcCommand(delta_front=float("nan") if k == nan_step else 0.0)
-        tq = WheelTorques(torque=np.full(4, 20.0))
+        cmd = MpcCommand(delta_front=float("nan") if k == nan_step else
+                         1e300 if k == huge_steer_step else 0.0)
+        tq = WheelTorques(torque=np.full(4, 1e300 if k == huge_torque_step else 20.0))
         cmd.header = tq.header = msg.header
         pub_cmd.publish(cmd)
         pub_tq.publish(tq)
@@ -70,7 +72,7 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
         f"run did not end; got {len(states)} states"
     end = status[-1]
     assert end["completed"], end
-    assert end["steps"] == 100 and end["rejected_commands"] >= 1
+    assert end["steps"] == 100 and end["rejected_commands"] >= 3
     # heartbeats while running: progress in steps, simulated and wall time (the runner's
     # progress line and nothing else per step)
     # start-up (state 0 until its fourth publication) is reported apart and left out of the
@@ -93,7 +95,11 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
         vals = [getattr(msg, k) for k in ("x", "y", "yaw", "vx", "vy", "yaw_rate", "ay")]
         assert all(math.isfinite(v) for v in vals)
         assert np.all(np.isfinite(msg.fz)) and np.all(np.isfinite(msg.fx))
-    # The NaN steer was rejected: the front wheels stayed straight.
+    # The NaN and the 1e300 steer were rejected: the front wheels stayed straight; the 1e300
+    # torques too: the car kept the 20 N·m acceleration (clipped to the motors' limit they
+    # would have added about 0.06 m/s in one step)
     assert max(abs(m.steer_front) for m in states.values()) < 1e-9
+    dv = np.diff([states[k].vx for k in range(101)])
+    assert np.max(np.abs(dv)) < 0.02, dv
     assert states[0].vx == pytest.approx(10.0, abs=1e-6) and states[100].x > 9.0
     assert refs and len(refs[0].x) == len(refs[0].speed) > 100

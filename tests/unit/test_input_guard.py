@@ -49,6 +49,17 @@ def test_a_poisoned_reference_is_refused_naming_the_array():
         check_reference(x, x * np.nan, *ok[2:])
 
 
+def test_a_reference_with_an_absurd_yaw_or_repeated_points_is_refused():
+    x = np.linspace(0.0, 100.0, 101)
+    ok = (x, 0.0 * x, 0.0 * x, 0.0 * x, 16.0 + 0.0 * x)
+    yaw = ok[2].copy()
+    yaw[5] = 1e300
+    with pytest.raises(ValueError, match="reference yaw"):
+        check_reference(ok[0], ok[1], yaw, *ok[3:])
+    with pytest.raises(ValueError, match="distinct"):
+        check_reference([0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [10.0, 10.0])
+
+
 def test_a_stray_future_stamp_is_rejected_and_never_becomes_the_last():
     g = StampGate(100 * MS)
     assert [g.check(k * MS) for k in range(3)] == [Stamp.NEW] * 3

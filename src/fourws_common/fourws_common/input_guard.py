@@ -5,7 +5,8 @@ A node checks each message at its edge, before any value reaches a core or an in
 - :func:`implausible_fields` — a field that is not finite or lies outside the physical range
   of :data:`STATE_LIMITS` (a finite 1.7e308 m/s is as wrong as NaN: it overflows the first
   product it enters);
-- :func:`check_reference` — a reference trajectory with non-finite or absurd samples;
+- :func:`check_reference` — a reference trajectory with non-finite or absurd samples, or
+  repeated points (the one check of every node that takes a reference);
 - :class:`StampGate` — stamps must move forward by at most ``max_jump_ns``; an equal stamp is
   a repeat (lockstep republishes), an older one or a jump far ahead is rejected, *not*
   adopted as the new "last" (one stray message never locks a node out of later input). A
@@ -47,10 +48,20 @@ STATE_LIMITS: dict[str, tuple[float, float]] = {
     "fz": (-1e3, 1e6),           # N (slightly negative: a wheel just off the ground)
     "mu": (0.0, 5.0),            # 1
 }
+#: Physical ranges (inclusive) of command fields, SI: a finite command beyond them (1e300 N·m)
+#: is a unit error or a fault, rejected as NaN is, never clipped into a plausible one.
+COMMAND_LIMITS: dict[str, tuple[float, float]] = {
+    "delta_front": (-math.pi / 2, math.pi / 2),   # rad
+    "delta_rear": (-math.pi / 2, math.pi / 2),    # rad
+    "yaw_moment": (-1e6, 1e6),                    # N·m
+    "torque": (-1e5, 1e5),                        # N·m per wheel
+}
 #: Reference trajectory ranges: position (m), curvature (1/m), speed (m/s).
 REF_POSITION_MAX_M = 1e6
 REF_CURVATURE_MAX = 10.0
 REF_SPEED_MAX_MPS = 100.0
+#: Shortest distance (m) between consecutive reference points: a path has a direction there.
+REF_MIN_SEGMENT_M = 1e-9
 
 
 def implausible_fields(msg: Any, names: Iterable[str],
@@ -88,7 +99,7 @@ def check_reference(x, y, yaw, curvature, speed) -> None:
         if not np.all(np.isfinite(a)):
             raise ValueError(f"reference {name}: holds non-finite values")
     for name, lim in (("x", REF_POSITION_MAX_M), ("y", REF_POSITION_MAX_M),
-                      ("curvature", REF_CURVATURE_MAX)):
+                      ("yaw", STATE_LIMITS["yaw"][1]), ("curvature", REF_CURVATURE_MAX)):
         m = float(np.max(np.abs(np.asarray(arrays[name], dtype=float))))
         if m > lim:
             raise ValueError(f"reference {name}: |{name}| up to {m:.3g}, beyond {lim:g}")
@@ -96,6 +107,9 @@ def check_reference(x, y, yaw, curvature, speed) -> None:
     if np.any(sp < 0.0) or np.any(sp > REF_SPEED_MAX_MPS):
         raise ValueError(f"reference speed: outside 0..{REF_SPEED_MAX_MPS:g} m/s "
                          f"({sp.min():.3g}..{sp.max():.3g})")
+    seg = np.hypot(np.diff(np.asarray(x, dtype=float)), np.diff(np.asarray(y, dtype=float)))
+    if np.any(seg <= REF_MIN_SEGMENT_M):
+        raise ValueError("reference x, y: consecutive points must be distinct")
 
 
 class Stamp(Enum):

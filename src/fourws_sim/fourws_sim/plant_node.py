@@ -42,11 +42,12 @@ the same status as JSON to ``status_file`` (if set: the reliable record a superv
 after the exit), and exits with :class:`fourws_common.exit_codes.ExitCode` COMPLETED (0),
 ABORTED (3: left the road or spun) or TIMEOUT (4: commands did not arrive).
 
-Bad input: a NaN/inf command is rejected and the last valid one held (counted, logged at most
-once per second); angles beyond the actuator limits are clipped by the actuator model with a
-warning; in lockstep a command stamped for another step is ignored. The run ends at the
-scenario's end, when the car leaves the road (``abort_lateral_error_m``) or spins
-(``abort_sideslip_deg``); the reason is logged and published on ``/run/status``.
+Bad input: a NaN/inf command, or a finite one beyond the physical ranges of
+``fourws_common.input_guard.COMMAND_LIMITS``, is rejected and the last valid one held
+(counted, logged at most once per second); angles beyond the actuator limits are clipped by
+the actuator model with a warning; in lockstep a command stamped for another step is ignored.
+The run ends at the scenario's end, when the car leaves the road (``abort_lateral_error_m``)
+or spins (``abort_sideslip_deg``); the reason is logged and published on ``/run/status``.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ import json
 import math
 import os
 import time
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -75,6 +77,7 @@ from fourws_common.conversions import (
 )
 from fourws_common.exit_codes import ExitCode
 from fourws_common.health import WARN, NodeHealth, Runtime
+from fourws_common.input_guard import COMMAND_LIMITS, implausible_fields
 from fourws_common.node_main import run_node
 from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
@@ -223,19 +226,23 @@ class PlantNode(Node):
 
     # -- inputs --------------------------------------------------------------------------
     def _valid_cmd(self, msg: MpcCommand) -> bool:
-        vals = (msg.delta_front, msg.delta_rear, msg.yaw_moment)
-        if all(math.isfinite(v) for v in vals):
+        bad = implausible_fields(msg, ("delta_front", "delta_rear", "yaw_moment"),
+                                 COMMAND_LIMITS)
+        if not bad:
             return True
-        self.reject_log(self._now_ns(), f"rejected non-finite mpc_command {vals}; holding "
+        self.reject_log(self._now_ns(), f"rejected mpc_command: {', '.join(bad)}; holding "
                         f"the last valid steer command {self.steer_cmd}")
         return False
 
     def _valid_torques(self, msg: WheelTorques) -> np.ndarray | None:
-        """The message's torques as a new (4,) array, N·m, or None (logged) if not finite."""
+        """The message's torques as a new (4,) array, N·m, or None (logged) if not finite or
+        beyond :data:`~fourws_common.input_guard.COMMAND_LIMITS`."""
         t = np.array(msg.torque, dtype=float)
-        if t.shape == (4,) and np.all(np.isfinite(t)):
+        bad = (["torque: not 4 values"] if t.shape != (4,) else
+               implausible_fields(SimpleNamespace(torque=t), ("torque",), COMMAND_LIMITS))
+        if not bad:
             return t
-        self.reject_log(self._now_ns(), f"rejected non-finite wheel_torques {t.tolist()}; "
+        self.reject_log(self._now_ns(), f"rejected wheel_torques: {', '.join(bad)}; "
                         f"holding the last valid torques")
         return None
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from fourws_common.health import NodeHealth
+from fourws_common.input_guard import check_reference
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import qos_of
@@ -58,6 +59,8 @@ class SpeedPidNode(Node):
 
     def _on_ref(self, msg: ReferenceTrajectory) -> None:
         try:
+            # the check every node applies to a reference (the MPC and the allocator too)
+            check_reference(msg.x, msg.y, msg.yaw, msg.curvature, msg.speed)
             profile = SpeedProfile(msg.x, msg.y, msg.speed)
         except ValueError as exc:
             self.health.reject("reference", 0, f"rejected reference trajectory: {exc}")

@@ -99,22 +99,10 @@ class Reference:
         :func:`fourws_common.input_guard.check_reference`).
         """
         check_reference(x, y, yaw, curvature, speed)
-        arrs = {}
-        for name, a in (("x", x), ("y", y), ("yaw", yaw), ("curvature", curvature),
-                        ("speed", speed)):
-            v = np.asarray(a, dtype=float).reshape(-1)
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"reference {name}: non-finite values")
-            arrs[name] = v
-        n = len(arrs["x"])
-        if n < 2:
-            raise ValueError("reference x: need at least 2 points")
-        for name, v in arrs.items():
-            if len(v) != n:
-                raise ValueError(f"reference {name}: length {len(v)} != len(x) {n}")
+        arrs = {name: np.array(a, dtype=float)
+                for name, a in (("x", x), ("y", y), ("yaw", yaw), ("curvature", curvature),
+                                ("speed", speed))}
         seg = np.hypot(np.diff(arrs["x"]), np.diff(arrs["y"]))
-        if np.any(seg <= 1e-9):
-            raise ValueError("reference x, y: consecutive points must be distinct")
         s = np.concatenate([[0.0], np.cumsum(seg)])
         for v in arrs.values():
             v.setflags(write=False)
