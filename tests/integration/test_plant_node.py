@@ -103,3 +103,37 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     assert np.max(np.abs(dv)) < 0.02, dv
     assert states[0].vx == pytest.approx(10.0, abs=1e-6) and states[100].x > 9.0
     assert refs and len(refs[0].x) == len(refs[0].speed) > 100
+
+
+def test_a_runtime_scenario_that_does_not_load_is_refused_naming_it(graph, ros):
+    """``ros2 param set /plant_node scenario nope`` answers unsuccessful with the reason, and
+    the plant keeps its scenario; a scenario that loads is accepted (issue 41, item 7)."""
+    from rcl_interfaces.srv import GetParameters, SetParameters
+    from rclpy.parameter import Parameter
+
+    graph([NodeSpec("plant_node", "fourws_sim", "plant_node",
+                    params_files=[str(config_dir("fourws_sim") / "plant.yaml")],
+                    parameters={"scenario": "dlc_60_mu05", "wait_for_subscribers": 1})])
+    set_cli = ros.node.create_client(SetParameters, "/plant_node/set_parameters")
+    get_cli = ros.node.create_client(GetParameters, "/plant_node/get_parameters")
+    assert ros.spin_until(lambda: set_cli.service_is_ready() and get_cli.service_is_ready(), 30)
+
+    def call(cli, req):
+        fut = cli.call_async(req)
+        assert ros.spin_until(fut.done, 30)
+        return fut.result()
+
+    def set_scenario(value: str):
+        req = SetParameters.Request(parameters=[Parameter("scenario", value=value)
+                                                .to_parameter_msg()])
+        return call(set_cli, req).results[0]
+
+    def scenario() -> str:
+        return call(get_cli, GetParameters.Request(names=["scenario"])).values[0].string_value
+
+    bad = set_scenario("nope")
+    assert not bad.successful and "nope" in bad.reason, bad
+    assert scenario() == "dlc_60_mu05"
+    good = set_scenario("dlc_90_mu06")
+    assert good.successful, good
+    assert scenario() == "dlc_90_mu06"

@@ -220,6 +220,9 @@ class PlantNode(Node):
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
+        # a scenario or vehicle override that would not load is refused now (ValueError:
+        # ParamBinding answers the set as failed, naming why), not at the next run
+        load_scenario(cfg.scenario).with_vehicle_overrides(cfg.vehicle_overrides)
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.get_logger().info("parameters updated: abort limits apply now; scenario, mode "
                                "and timing apply to the next run")
