@@ -536,3 +536,24 @@ def test_rejection_counts_from_diagnostics_reach_the_metrics(tmp_path):
     assert bag_metrics(full)["input_rejections"] == {}
     full.rejections = run.rejections
     assert bag_metrics(full)["input_rejections"] == {"mpc_node": {"future_stamp": 3}}
+
+
+def test_strays_in_a_row_never_become_the_runs_timeline():
+    """Two stray states 10 ms apart, stamped 1000 s ahead, among a run of 1044 (issue 41,
+    item 3: they had been taken for the run's new timeline, and 99 056 steps counted
+    missing): the run's timeline stays the plant's, the strays are counted apart; a state
+    that arrives late, within the jump limit, stays on the timeline."""
+    from fourws_bringup.bag.run_data import drop_strays
+
+    step = 10_000_000
+    plant = [(k * step, k, None) for k in range(1044)]
+    strays = [(1000 * 10**9, -1, None), (1000 * 10**9 + step, -2, None)]
+    rows = plant[:100] + strays + plant[100:]
+    kept, n = drop_strays(rows)
+    assert kept == plant and n == 2
+    late = plant[:50] + plant[51:60] + [plant[50]] + plant[60:]
+    kept, n = drop_strays(late)
+    assert n == 0 and sorted(kept) == plant
+    far_past = [(-5 * 10**9, -3, None)]
+    kept, n = drop_strays(plant[:10] + far_past + plant[10:])
+    assert kept == plant and n == 1

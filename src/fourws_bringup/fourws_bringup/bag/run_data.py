@@ -50,22 +50,28 @@ def _column(values: list[Any]) -> np.ndarray:
 
 def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, int, Any]], int]:
     """The messages of one per-step topic that lie on the run's timeline, in receive order,
-    and how many did not: the nodes' own stamp rule
-    (:class:`fourws_common.input_guard.StampGate`), so a stray stamped 1e6 s ahead (or in the
-    past) that every controller rejected is not a step of the run either, and the analysis
-    grid does not stretch to it. A message less than the jump limit behind the timeline is
-    kept: it only arrived late."""
-    from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
+    and how many did not.
 
-    gate = StampGate(MAX_STAMP_JUMP_NS)
-    kept = []
+    A timeline is a chain of stamps that each follow the last by at most the nodes' jump
+    limit (``MAX_STAMP_JUMP_NS``, :class:`fourws_common.input_guard.StampGate`), or lie at
+    most that far behind it (a late arrival). Every message joins the largest timeline it
+    fits, else starts one of its own; the run's timeline is the largest, the plant's own.
+    So strays stamped far ahead or behind, alone or several in a row (which a node's gate
+    may take for a new timeline), are never steps of the run, and the analysis grid does not
+    stretch to them."""
+    from fourws_common.input_guard import MAX_STAMP_JUMP_NS
+
+    lines: list[list[Any]] = []          # [last stamp, rows], largest first
     for row in stamped:
-        verdict = gate.check(row[0])
-        if verdict is Stamp.FUTURE:
-            continue
-        if verdict is Stamp.PAST and gate.last_ns - row[0] > MAX_STAMP_JUMP_NS:
-            continue  # a late arrival within the window is kept (rows are sorted by stamp)
-        kept.append(row)
+        for line in lines:
+            if abs(row[0] - line[0]) <= MAX_STAMP_JUMP_NS:
+                line[0] = max(line[0], row[0])
+                line[1].append(row)
+                break
+        else:
+            lines.append([row[0], [row]])
+        lines.sort(key=lambda ln: -len(ln[1]))
+    kept = lines[0][1] if lines else []
     return kept, len(stamped) - len(kept)
 
 
