@@ -222,10 +222,13 @@ def test_two_runs_against_the_same_controllers_equal_bit_for_bit(graph, ros, sho
 
 
 # -- bad input ------------------------------------------------------------------------------
-def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_path):
-    """One VehicleState stamped 1e6 s ahead, published into a running lockstep graph: every
-    controller rejects it (counted on /diagnostics) and the run completes; the bag scores in
-    moments, the stray left out of its timeline."""
+@pytest.mark.parametrize("n_strays", [1, 2])
+def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_path,
+                                                                n_strays):
+    """One VehicleState stamped 1e6 s ahead, or two back to back 10 ms apart (which confirmed
+    each other as a new timeline and froze the run, issue 41 item 2), published into a
+    running lockstep graph: every controller rejects them (counted on /diagnostics) and the
+    run completes; the bag scores in moments, the strays left out of its timeline."""
     bag = tmp_path / "bag"
     specs = runner.graph_specs("dlc_60_mu05", CONTROLLER, bag, status_file=tmp_path / "s.json")
     specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
@@ -248,18 +251,21 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
     assert ros.spin_until(lambda: readers <= stray_pub.get_subscription_count() and len(
         ros.node.get_subscriptions_info_by_topic("/vehicle/state"))
         <= stray_pub.get_subscription_count(), 30)
-    stray_pub.publish(stray)
+    for i in range(n_strays):
+        stray.header.stamp = ns_to_stamp(10**6 * 10**9 + i * STEP_NS)
+        stray_pub.publish(stray)
     assert stray_pub.wait_for_all_acked(Duration(seconds=10))
     assert sup.wait_exit("plant_node", timeout_s=120) == 0
     sup.stop()
     m = score_run(tmp_path / "bag")
     assert m["completed"] and m["missing_steps"] == 0
-    assert m["stray_messages"] == {"/vehicle/state": 1}
-    # A node took the stray and rejected it, or (keep-last 1, a second writer) the plant's
-    # next state replaced it in the node's queue before it was taken: either way nothing
-    # else was rejected, and the run is the in-process loop's bit for bit.
+    assert m["stray_messages"] == {"/vehicle/state": n_strays}
+    # A node took each stray and rejected it, or (keep-last 1, a second writer) the plant's
+    # next state or the next stray replaced it in the node's queue before it was taken:
+    # either way nothing else was rejected, and the run is the in-process loop's bit for bit.
     for n, counts in m["input_rejections"].items():
-        assert counts == {"future_stamp": 1}, (n, counts)
+        assert set(counts) == {"future_stamp"} and 1 <= counts["future_stamp"] <= n_strays, \
+            (n, counts)
     ref = run_closed_loop("dlc_60_mu05", CONTROLLER)
     rec = read_run(tmp_path / "bag")
     assert rec.state["stamp_ns"].max() < 20 * 10**9, "the stray is on the analysis grid"

@@ -48,14 +48,15 @@ def test_unknown_controller_and_overdemanding_scenario_are_clear_errors(tmp_path
 def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path, compose, expected):
     """A bad MPC parameter kills the process hosting mpc_node at start-up; the run stops,
     keeps its bag folder, and metrics.json names the process (and, for the container, the
-    nodes it hosted); the log says which parameter was wrong."""
-    preset = tmp_path / "broken.yaml"
-    preset.write_text(yaml.safe_dump({
-        "mpc_node": {"ros__parameters": {"controller": "broken", "q_y": -5.0}},
-        "allocator_node": {"ros__parameters": {"method": "optimal"}}}))
+    nodes it hosted); the log says which parameter was wrong. (A bad preset is refused before
+    any node starts, ``test_cli_files``; the parameter comes here through a condition's
+    ``mpc_overrides``, which reach the node as they are.)"""
+    condition = tmp_path / "broken.yaml"
+    condition.write_text(yaml.safe_dump({"name": "broken", "mpc_overrides": {"q_y": -5.0}}))
     out = tmp_path / "run"
-    r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", str(preset),
-                "--out", str(out), "--no-plots", "--compose", compose)
+    r = _fourws("run", "--scenario", "dlc_60_mu05", "--controller", "improved",
+                "--condition", str(condition), "--out", str(out), "--no-plots",
+                "--compose", compose)
     assert r.returncode == 1
     m = json.loads((out / "metrics.json").read_text())
     process = expected.split()[0]

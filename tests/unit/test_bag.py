@@ -557,3 +557,8 @@ def test_strays_in_a_row_never_become_the_runs_timeline():
     far_past = [(-5 * 10**9, -3, None)]
     kept, n = drop_strays(plant[:10] + far_past + plant[10:])
     assert kept == plant and n == 1
+    # a node that paused for 2 s (a realtime stall) answers again 200 steps later: both
+    # stretches are the run's, not strays
+    paused = plant[:110] + plant[310:]
+    kept, n = drop_strays(paused)
+    assert kept == paused and n == 0

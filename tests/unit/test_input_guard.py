@@ -82,3 +82,29 @@ def test_a_confirmed_jump_is_a_new_timeline():
     assert g.check(10**12 + MS) is Stamp.JUMPED            # ... confirmed by the next state
     with pytest.raises(ValueError):
         StampGate(0)
+
+
+def test_strays_in_a_row_never_move_a_live_timeline_and_a_restart_is_taken_once_it_is_quiet():
+    """Issue 41, item 2: two future stamps back to back confirmed each other as a new timeline
+    while the plant was still publishing. With arrival times, a jump is taken only once the
+    current timeline has been silent for quiet_ns."""
+    ms = 1_000_000
+    gate = StampGate(1000 * ms, quiet_ns=1000 * ms)
+    assert gate.check(0, now_ns=0) is Stamp.NEW
+    assert gate.check(10 * ms, now_ns=5 * ms) is Stamp.NEW
+    far = 10**6 * 1000 * ms
+    assert gate.check(far, now_ns=6 * ms) is Stamp.FUTURE
+    assert gate.check(far + 10 * ms, now_ns=7 * ms) is Stamp.FUTURE      # not confirmed
+    assert gate.check(20 * ms, now_ns=8 * ms) is Stamp.NEW               # the plant goes on
+    assert gate.last_ns == 20 * ms
+    # the plant restarts from 0: its republished state 0 is taken once the old timeline has
+    # been quiet for 1 s, not before
+    assert gate.check(0, now_ns=500 * ms) is Stamp.PAST
+    assert gate.check(0, now_ns=750 * ms) is Stamp.PAST
+    assert gate.check(0, now_ns=1009 * ms) is Stamp.JUMPED
+    assert gate.check(10 * ms, now_ns=1010 * ms) is Stamp.NEW
+    # without arrival times the gate confirms at once, as before
+    plain = StampGate(1000 * ms)
+    plain.check(0)
+    plain.check(far)
+    assert plain.check(far + 10 * ms) is Stamp.JUMPED

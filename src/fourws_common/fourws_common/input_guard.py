@@ -12,7 +12,9 @@ A node checks each message at its edge, before any value reaches a core or an in
   adopted as the new "last" (one stray message never locks a node out of later input). A
   jump (forward, or back to an earlier time: a restarted plant or bag) that the next stamp
   confirms — it follows the jumped stamp by 0..``max_jump_ns`` — is a new timeline: the gate
-  accepts it and reports ``JUMPED`` so the node can reset its state.
+  accepts it and reports ``JUMPED`` so the node can reset its state; in the nodes only once
+  the old timeline has been silent for :data:`TIMELINE_QUIET_NS` (strays in a row never move
+  a run off a plant that is still publishing).
 """
 
 from __future__ import annotations
@@ -123,38 +125,51 @@ class Stamp(Enum):
 
 
 class StampGate:
-    """Forward-only stamps with a bounded step; see the module docstring."""
+    """Forward-only stamps with a bounded step; see the module docstring.
 
-    def __init__(self, max_jump_ns: int) -> None:
+    ``quiet_ns`` > 0 (with the arrival times given to :meth:`check`): a jump is confirmed
+    only once the current timeline has been silent that long, so a stray source, however
+    many messages it sends, never moves a run off a timeline that is still alive (the
+    plant republishes its state every 0.25 s even while it waits); a restarted plant's
+    timeline is taken once the old one has stopped."""
+
+    def __init__(self, max_jump_ns: int, quiet_ns: int = 0) -> None:
         if max_jump_ns <= 0:
             raise ValueError(f"max_jump_ns: must be > 0, got {max_jump_ns}")
         self.max_jump_ns = int(max_jump_ns)
+        self.quiet_ns = int(quiet_ns)
         self.last_ns: int | None = None
         self._pending_ns: int | None = None
+        self._seen_ns: int | None = None
 
     def reset(self) -> None:
         self.last_ns = None
         self._pending_ns = None
+        self._seen_ns = None
 
     @property
     def pending_ns(self) -> int | None:
         """The last rejected jump, waiting for a stamp to confirm it (None: none)."""
         return self._pending_ns
 
-    def check(self, stamp_ns: int) -> Stamp:
-        """Classify ``stamp_ns``; NEW and JUMPED make it the new last stamp."""
+    def check(self, stamp_ns: int, now_ns: int | None = None) -> Stamp:
+        """Classify ``stamp_ns`` arriving at ``now_ns`` (any monotonic clock; None: no
+        quiet rule); NEW and JUMPED make it the new last stamp."""
         last = self.last_ns
         if last is None:
-            self.last_ns, self._pending_ns = stamp_ns, None
+            self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
             return Stamp.NEW
         if stamp_ns == last:
+            self._seen_ns = now_ns
             return Stamp.REPEAT
         if 0 < stamp_ns - last <= self.max_jump_ns:
-            self.last_ns, self._pending_ns = stamp_ns, None
+            self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
             return Stamp.NEW
         pending = self._pending_ns
-        if pending is not None and 0 <= stamp_ns - pending <= self.max_jump_ns:
-            self.last_ns, self._pending_ns = stamp_ns, None
+        alive = (self.quiet_ns > 0 and now_ns is not None and self._seen_ns is not None
+                 and now_ns - self._seen_ns < self.quiet_ns)
+        if pending is not None and 0 <= stamp_ns - pending <= self.max_jump_ns and not alive:
+            self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
             return Stamp.JUMPED
         self._pending_ns = stamp_ns
         return Stamp.PAST if stamp_ns < last else Stamp.FUTURE
@@ -163,6 +178,9 @@ class StampGate:
 #: Largest forward step between consecutive input stamps that a node accepts without
 #: confirmation (ns): 1 s, 100 periods of the 100 Hz graph.
 MAX_STAMP_JUMP_NS = 1_000_000_000
+#: How long (ns, steady clock) the current timeline must be silent before a node takes a
+#: confirmed jump as a new timeline: 4 of the plant's 0.25 s republish periods.
+TIMELINE_QUIET_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)

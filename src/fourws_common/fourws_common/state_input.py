@@ -37,6 +37,7 @@ from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth, Runtime, with_input_age
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
+    TIMELINE_QUIET_NS,
     InputConfig,
     Stamp,
     StampGate,
@@ -81,7 +82,7 @@ class StateInput:
         self._waiting: Any = None
         self._match_timer = None  # retries the waiting state until the outputs have matched
         self._last_input: float | None = None  # steady time of the newest state received
-        self.gate = StampGate(MAX_STAMP_JUMP_NS)
+        self.gate = StampGate(MAX_STAMP_JUMP_NS, TIMELINE_QUIET_NS)
         self._wait_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self._match_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self.latest = LatestInput(node, health.guard(VEHICLE_STATE.name, self._on_state),
@@ -163,7 +164,7 @@ class StateInput:
                     clock=Clock(clock_type=ClockType.STEADY_TIME))
             return
         prev_ns = self.gate.last_ns
-        verdict = self.gate.check(stamp_ns)
+        verdict = self.gate.check(stamp_ns, time.monotonic_ns())
         if verdict is Stamp.REPEAT:
             self._h.repeat()
             return
@@ -178,7 +179,7 @@ class StateInput:
             log.warning(f"stamps went back to {stamp_ns} ns: new run, {self._core_name} reset")
             self._h.reset()
             self.gate.reset()
-            self.gate.check(stamp_ns)
+            self.gate.check(stamp_ns, time.monotonic_ns())
         elif verdict is Stamp.JUMPED:
             log.warning(f"stamps jumped ahead to {stamp_ns} ns (from {prev_ns} ns): continuing")
             jumped_ahead = True

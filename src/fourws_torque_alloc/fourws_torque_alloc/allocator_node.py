@@ -31,6 +31,7 @@ from fourws_common.conversions import RateLimitedLog, stamp_to_ns
 from fourws_common.health import NodeHealth, Runtime, with_input_age
 from fourws_common.input_guard import (
     MAX_STAMP_JUMP_NS,
+    TIMELINE_QUIET_NS,
     Stamp,
     StampGate,
     check_reference,
@@ -90,7 +91,7 @@ class AllocatorNode(Node):
         self.last_stamp_ns: int | None = None
         self.cached: WheelTorques | None = None
         self.last_valid = np.zeros(4)
-        self.gate = StampGate(MAX_STAMP_JUMP_NS)  # on the state stamps
+        self.gate = StampGate(MAX_STAMP_JUMP_NS, TIMELINE_QUIET_NS)  # on the state stamps
         self.health = NodeHealth(self)
         self._last_input: float | None = None
         self.health.runtime(lambda: with_input_age(
@@ -143,7 +144,7 @@ class AllocatorNode(Node):
     def _on_state(self, msg: VehicleState) -> None:
         self._last_input = time.monotonic()
         stamp_ns = stamp_to_ns(msg.header.stamp)
-        verdict = self.gate.check(stamp_ns)
+        verdict = self.gate.check(stamp_ns, time.monotonic_ns())
         if verdict in (Stamp.PAST, Stamp.FUTURE):
             self.health.reject(f"{verdict.value}_stamp", stamp_ns,
                                f"rejected state stamped {stamp_ns} ns: in the "
@@ -153,7 +154,7 @@ class AllocatorNode(Node):
             self.get_logger().warning(f"stamps jumped to {stamp_ns} ns: new timeline, "
                                       "allocator reset")
             self._reset()
-            self.gate.check(stamp_ns)
+            self.gate.check(stamp_ns, time.monotonic_ns())
         self._on_input(self.states, msg)
 
     def _on_input(self, store: dict, msg) -> None:

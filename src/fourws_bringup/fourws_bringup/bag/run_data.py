@@ -52,27 +52,34 @@ def drop_strays(stamped: list[tuple[int, int, Any]]) -> tuple[list[tuple[int, in
     """The messages of one per-step topic that lie on the run's timeline, in receive order,
     and how many did not.
 
-    A timeline is a chain of stamps that each follow the last by at most the nodes' jump
-    limit (``MAX_STAMP_JUMP_NS``, :class:`fourws_common.input_guard.StampGate`), or lie at
-    most that far behind it (a late arrival). Every message joins the largest timeline it
-    fits, else starts one of its own; the run's timeline is the largest, the plant's own.
-    So strays stamped far ahead or behind, alone or several in a row (which a node's gate
-    may take for a new timeline), are never steps of the run, and the analysis grid does not
-    stretch to them."""
+    A timeline is a chain of stamps that each lie within the nodes' jump limit
+    (``MAX_STAMP_JUMP_NS``, :class:`fourws_common.input_guard.StampGate`) of its newest one,
+    ahead or behind (a late arrival). Every message joins the largest timeline it fits, else
+    starts one of its own. The run's timeline is the largest, with every other that was
+    received wholly before or after it and the others kept (a node that paused and resumed
+    2 s later, or a restarted plant); a timeline received while the run's went on (strays
+    stamped far ahead or behind, alone or several in a row, which a node's gate may take for
+    a new timeline) is left out, so the analysis grid never stretches to it."""
     from fourws_common.input_guard import MAX_STAMP_JUMP_NS
 
-    lines: list[list[Any]] = []          # [last stamp, rows], largest first
-    for row in stamped:
-        for line in lines:
+    lines: list[list[Any]] = []          # [newest stamp, [(receive index, row), ...]]
+    for i, row in enumerate(stamped):
+        for line in sorted(lines, key=lambda ln: -len(ln[1])):
             if abs(row[0] - line[0]) <= MAX_STAMP_JUMP_NS:
                 line[0] = max(line[0], row[0])
-                line[1].append(row)
+                line[1].append((i, row))
                 break
         else:
-            lines.append([row[0], [row]])
-        lines.sort(key=lambda ln: -len(ln[1]))
-    kept = lines[0][1] if lines else []
-    return kept, len(stamped) - len(kept)
+            lines.append([row[0], [(i, row)]])
+    kept: list[tuple[int, Any]] = []
+    spans: list[tuple[int, int]] = []
+    for _, rows in sorted(lines, key=lambda ln: -len(ln[1])):
+        lo, hi = rows[0][0], rows[-1][0]
+        if all(hi < a or lo > b for a, b in spans):
+            spans.append((lo, hi))
+            kept += rows
+    kept.sort(key=lambda r: r[0])
+    return [row for _, row in kept], len(stamped) - len(kept)
 
 
 def _columns(stamped: list[tuple[int, int, int, Any]]) -> dict[str, np.ndarray]:
