@@ -562,3 +562,24 @@ def test_strays_in_a_row_never_become_the_runs_timeline():
     paused = plant[:110] + plant[310:]
     kept, n = drop_strays(paused)
     assert kept == paused and n == 0
+
+
+def test_a_chunk_is_completed_once_it_spans_its_time_limit(tmp_path):
+    """Issue 41, item 8: a killed recorder lost its first ~1.5 s (one 256 kB chunk). With
+    chunk_max_span_ns a chunk is completed once its messages span that much log time, so
+    a file cut where it stands loses at most that span: recovered, it holds every message
+    older than about 1 s before the cut."""
+    folder = tmp_path / "b"
+    step = 10_000_000
+    w = BagWriter(folder, [topic_info("/vehicle/state")], chunk_size_bytes=64 * 2**20,
+                  chunk_max_span_ns=10**9)
+    completed = [k for k in range(350)
+                 if w.write("/vehicle/state", serialize_message(vehicle_state(k)), k * step)]
+    # every 1 s of log time (101 messages: the one that reaches the span closes its chunk),
+    # not once 64 MB are buffered
+    assert completed == [100, 201, 302]
+    cut = tmp_path / "cut.mcap"
+    shutil.copyfile(w.path, cut)                  # the file as a kill would leave it
+    w.close()
+    assert recover(cut, tmp_path / "fixed.mcap") == 303
+    assert read_run(tmp_path / "fixed.mcap").state["stamp_ns"].size == 303

@@ -19,9 +19,10 @@ readers tell these bags from older ones (``wall_receive_time``; before that, hea
 publish times).
 
 Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
-messages, zstd) and flushed after each chunk, and ``metadata.yaml`` is rewritten with the
-counts that are on disk, so a killed recorder loses at most the open chunk and leaves a
-recognisable bag (``fourws bag recover`` makes its MCAP whole again).
+messages, or ``chunk_max_span_s`` of log time, whichever comes first; zstd) and flushed
+after each chunk, and ``metadata.yaml`` is rewritten with the counts that are on disk, so a
+killed recorder loses at most the open chunk and leaves a recognisable bag (``fourws bag
+recover`` makes its MCAP whole again).
 
 Start gate (``start_gate_topic``, /vehicle/state in ``fourws run``): that topic is
 subscribed to last, once every other recorded per-step topic has a matched publisher and
@@ -158,6 +159,9 @@ class RecorderConfig:
     chunk_size_bytes: int = param(262144, "uncompressed size of one MCAP chunk; a killed "
                                   "recorder loses at most one chunk", lo=4096, hi=64 * 2**20,
                                   unit="bytes")
+    chunk_max_span_s: float = param(1.0, "a chunk is also completed once its messages span "
+                                    "this much log time: a killed recorder loses at most "
+                                    "this much", lo=0.05, hi=3600.0, unit="s")
     compression: str = param("zstd", "chunk compression", choices=("zstd", "lz4", "none"))
     drain_quiet_s: float = param(0.3, "after a stop request, end once no message has come "
                                  "for this long (at once when no writer is left on any "
@@ -248,6 +252,7 @@ class RecorderNode(Node):
                   "fourws_namespace": self.get_namespace()}
         try:
             self.writer = BagWriter(cfg.output_dir, infos, chunk_size_bytes=cfg.chunk_size_bytes,
+                                    chunk_max_span_ns=int(cfg.chunk_max_span_s * 1e9),
                                     compression=cfg.compression, library="fourws recorder_node",
                                     custom_data=custom)
         except (BagError, OSError) as exc:

@@ -45,11 +45,14 @@ class BagWriter:
     counts, ``custom_data.fourws_state: recording``), again after every completed chunk (the
     counts that are on disk), and finally by :meth:`close` (``complete``). After every
     completed chunk the file is flushed to the OS, so a killed process loses at most the
-    chunk that was open. :meth:`close` is idempotent.
+    chunk that was open. A chunk is completed when it holds ``chunk_size_bytes`` or, with
+    ``chunk_max_span_ns``, once its messages span that much log time, whichever comes first:
+    the loss is bounded in time as well as in bytes. :meth:`close` is idempotent.
     """
 
     def __init__(self, folder: str | Path, topics: Iterable[TopicInfo], *,
                  chunk_size_bytes: int = 262144, compression: str = "zstd",
+                 chunk_max_span_ns: int | None = None,
                  library: str = "fourws recorder",
                  custom_data: Mapping[str, str] | None = None) -> None:
         from mcap.writer import LIBRARY_IDENTIFIER, Writer
@@ -75,6 +78,8 @@ class BagWriter:
         self._last_ns = 0
         self._durable: tuple[dict[str, int], int | None, int] = ({}, None, 0)
         self._pos = self._fh.tell()
+        self._chunk_span_ns = chunk_max_span_ns
+        self._chunk_first_ns: int | None = None   # log time of the open chunk's first message
         self.closed = False
         self.chunks_written = 0
         for t in topics:
@@ -125,10 +130,17 @@ class BagWriter:
         self._first_ns = log_time_ns if self._first_ns is None else min(self._first_ns,
                                                                          log_time_ns)
         self._last_ns = max(self._last_ns, log_time_ns)
+        if self._chunk_first_ns is None:
+            self._chunk_first_ns = int(log_time_ns)
         pos = self._fh.tell()
+        if (pos == self._pos and self._chunk_span_ns is not None
+                and log_time_ns - self._chunk_first_ns >= self._chunk_span_ns):
+            self._writer.flush()              # the open chunk spans the limit: complete it
+            pos = self._fh.tell()
         if pos == self._pos:
             return False
         self._pos = pos
+        self._chunk_first_ns = None
         self._fh.flush()
         self.chunks_written += 1
         self._durable = ({k: r.message_count for k, r in self.records.items()},
