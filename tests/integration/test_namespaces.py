@@ -48,6 +48,11 @@ def test_two_graphs_in_two_namespaces_of_one_domain(domain_id, tmp_path):
         assert not any(n.startswith(f"/{other}/") for n in names), names
         # each simulated car has its own clock (runner.clock_remap); /diagnostics is global
         assert f"/{ns}/clock" in names and "/clock" not in names and "/diagnostics" in names
+        # ... but a car's bag holds its own nodes' diagnostics only (issue 41, item 10)
+        with McapBag(tmp_path / ns / "bag") as bag:
+            statuses = {s.name.split(":")[0] for _t, _l, _p, msg in bag.decoded(["/diagnostics"])
+                        for s in msg.status}
+        assert statuses and all(s.startswith(f"/{ns}/") for s in statuses), statuses
         m = json.loads((tmp_path / ns / "metrics.json").read_text())
         m_alone = json.loads((tmp_path / f"{c}-alone" / "metrics.json").read_text())
         assert m["namespace"] == f"/{ns}" and m["completed"], m

@@ -47,3 +47,27 @@ def test_replay_yaml_mirrors_the_defaults():
 def test_bad_values_name_the_parameter(cls, values, name):
     with pytest.raises(ValueError, match=name):
         from_mapping(cls, values)
+
+
+def test_a_recorder_keeps_the_diagnostics_of_its_own_namespace_only():
+    """/diagnostics is one topic for every graph of a domain: the recorder of /car1 keeps
+    /car1's statuses, drops an array of /car2's, and trims a mixed one; at the root it keeps
+    the root's nodes (issue 41, item 10)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from fourws_bringup.recorder_node import own_diagnostics
+
+    def array(*names):
+        return serialize_message(DiagnosticArray(
+            status=[DiagnosticStatus(name=n) for n in names]))
+
+    car1 = own_diagnostics("/car1")
+    mine = array("/car1/mpc_node", "/car1/mpc_node: runtime")
+    assert car1(mine) == mine
+    assert car1(array("/car2/mpc_node", "/car2/mpc_node: runtime")) is None
+    trimmed = deserialize_message(car1(array("/car1/plant_node", "/car2/plant_node")),
+                                  DiagnosticArray)
+    assert [s.name for s in trimmed.status] == ["/car1/plant_node"]
+    root = own_diagnostics("/")
+    assert root(array("/mpc_node")) is not None and root(array("/car1/mpc_node")) is None

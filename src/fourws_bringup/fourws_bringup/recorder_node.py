@@ -73,6 +73,7 @@ from fourws_common.qos import PROFILES, dict_from_profile, profile_from_dict
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import (
     DEFAULT_TOPICS,
+    DIAGNOSTICS,
     TOPICS,
     TopicInfo,
     graph_name,
@@ -152,6 +153,32 @@ def lost_counts(gaps: Mapping[str, StampGaps], dds_lost: Mapping[str, int],
             out[topic] = n
     return out
 
+
+
+def own_diagnostics(namespace: str):
+    """A filter of serialized /diagnostics arrays for a recorder in ``namespace``: it keeps
+    the statuses of nodes in that namespace (``/car1/mpc_node``, ``/car1/mpc_node: runtime``)
+    and returns the array re-serialized, the bytes unchanged when all are kept, or None when
+    none is. /diagnostics is one topic for every graph of a domain (ROS convention); a car's
+    bag holds its own nodes' diagnostics only."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    ns = namespace.rstrip("/")
+
+    def node_namespace(status_name: str) -> str:
+        return status_name.split(":", 1)[0].rsplit("/", 1)[0]
+
+    def keep(data: bytes) -> bytes | None:
+        msg = deserialize_message(data, DiagnosticArray)
+        mine = [s for s in msg.status if node_namespace(s.name) == ns]
+        if len(mine) == len(msg.status):
+            return data
+        if not mine:
+            return None
+        msg.status = mine
+        return serialize_message(msg)
+    return keep
 
 @dataclass(frozen=True)
 class RecorderConfig:
@@ -340,10 +367,16 @@ class RecorderNode(Node):
 
     def _callback(self, topic: str):
         gaps = self.gaps.get(topic)
+        own = (own_diagnostics(self.get_namespace())
+               if graph_name(topic, self.get_namespace()) == DIAGNOSTICS.name else None)
 
         clock = self.get_clock()
 
         def on_message(data: bytes, info: dict) -> None:
+            if own is not None:
+                data = own(data)
+                if data is None:       # another graph's nodes (a car in another namespace)
+                    return
             now = clock.now().nanoseconds  # rosbag2's receive time: the node's clock
             sent = info.get("source_timestamp") or time.time_ns()
             seq = info.get("publication_sequence_number")
