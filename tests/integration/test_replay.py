@@ -152,6 +152,39 @@ def test_replay_paces_by_simulated_time_and_replays_only_the_chosen_topics(graph
     assert due[-1] == pytest.approx((n - 1) * 0.01 / 2.0)
 
 
+def test_wall_stamped_diagnostics_and_a_stray_neither_pace_nor_clock_the_replay(graph, ros,
+                                                                             tmp_path):
+    """Issue 41, item 1: /diagnostics carries the nodes' wall-clock stamps (1.8e9 s) among the
+    simulated ones, and a stray state sits 1e6 s ahead. Replayed at rate 1, the bag of 1 s
+    ends in about 1 s (paced by the simulated stamps it had waited decades for), /clock
+    never jumps to a wall or stray value and is published once per simulated step."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    n = 100
+    folder = tmp_path / "bag"
+    names = ["/vehicle/state", "/control/mpc_command", "/diagnostics"]
+    w = BagWriter(folder, [topic_info(t) for t in names], chunk_size_bytes=8192)
+    wall = 1_800_000_000 * 10**9
+    for k in range(n):
+        t = k * DT_NS
+        w.write("/vehicle/state", serialize_message(state(k)), t)
+        w.write("/control/mpc_command", serialize_message(command(k)), t + 1)
+        if k % 10 == 5:
+            diag = DiagnosticArray()
+            diag.header.stamp = ns_to_stamp(wall + t)
+            w.write("/diagnostics", serialize_message(diag), t + 2)
+        if k == 50:
+            w.write("/vehicle/state", serialize_message(state(10**8)), t + 3)   # 1e6 s ahead
+    w.close()
+    lis = Listener(ros, topics=("/vehicle/state", "/clock"))
+    t0 = time.monotonic()
+    sup = graph([replay(folder, rate=1.0)])
+    wait_done(sup, ros, timeout_s=30.0)
+    assert time.monotonic() - t0 < 20.0
+    assert lis.clock == [k * DT_NS for k in range(n)], lis.clock[:5]
+    assert len(lis.states) == n + 1                      # the stray is replayed, as recorded
+
+
 def test_lockstep_replay_waits_for_the_controller_answer_of_each_state(graph, ros, tmp_path):
     n = 30
     slow_k = 5

@@ -2,8 +2,10 @@
 
 Each replayed topic gets a publisher of its recorded type and offered QoS (latched topics stay
 transient_local), and its recorded CDR bytes are published as they are (``publish(bytes)``).
-``/clock`` is published from the header stamps: before a stamped message whose stamp is later
-than every stamp so far.
+``/clock`` is published from the header stamps of the per-step topics (the run's simulated
+time; /diagnostics and the like carry the nodes' own clock): before each such message whose
+stamp is later than every stamp so far, i.e. once per simulated step. A stamp more than the
+nodes' jump limit away from the newest (a stray) neither paces nor clocks.
 
 Timing: with ``pacing: stamp`` a message is due at ``t0 + (s - s0) / rate``, ``s`` the
 largest header stamp so far (simulated time, so ``rate: 1`` is real time); with
@@ -37,6 +39,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from fourws_common.conversions import ns_to_stamp
+from fourws_common.input_guard import MAX_STAMP_JUMP_NS
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import PROFILES, profile_from_dict, qos_of
@@ -134,7 +137,10 @@ class ReplayNode(Node):
             # the offered QoS as recorded; the table's for a channel without one
             qos = profile_from_dict(ch.qos) if ch.qos else PROFILES[qos_kind(g)]
             self.pubs[t] = self.create_publisher(message_class(ch.type), _ros_name(g), qos)
-            self.stamped[t] = first_field_is_stamp(ch.definition)
+            # only the per-step topics' stamps are the run's simulated time: /diagnostics
+            # and the like are stamped on the nodes' own (wall) clock
+            self.stamped[t] = (first_field_is_stamp(ch.definition)
+                               and qos_kind(self._graph[t]) == "control")
         self.clock_pub = None
         if cfg.publish_clock and CLOCK.name not in self.topics:
             self.clock_pub = self.create_publisher(Clock, CLOCK.ros_name, qos_of(CLOCK))
@@ -226,6 +232,12 @@ class ReplayNode(Node):
                 self._waiting = (stamp, time.monotonic() + self.cfg.lockstep_timeout_s)
                 return
 
+    def _on_timeline(self, stamp: int | None) -> bool:
+        """A stamp of the run's simulated time: the first, or within the nodes' jump limit of
+        the newest so far (a stray stamped far ahead or behind neither paces nor clocks)."""
+        return stamp is not None and (self._max_stamp is None
+                                      or abs(stamp - self._max_stamp) <= MAX_STAMP_JUMP_NS)
+
     def _due(self, stamp: int | None, log_ns: int, now: float) -> bool:
         rate = self.cfg.rate
         if self.cfg.pacing == "recorded":
@@ -233,13 +245,13 @@ class ReplayNode(Node):
                 self._log0 = log_ns
             offset_ns = log_ns - self._log0
         else:
-            if stamp is None or self._s0 is None:
+            if not self._on_timeline(stamp) or self._s0 is None:
                 return True
             offset_ns = max(stamp, self._max_stamp or stamp) - self._s0
         return rate == 0.0 or now >= self._t0 + offset_ns * 1e-9 / rate
 
     def _publish(self, topic: str, data: bytes, stamp: int | None) -> None:
-        if stamp is not None:
+        if self._on_timeline(stamp):
             if self._s0 is None:
                 self._s0 = stamp
             if self._max_stamp is None or stamp > self._max_stamp:
