@@ -179,6 +179,21 @@ def test_a_bad_argument_ends_the_launch_with_a_clear_error(ros2_env, domain_id, 
     assert "process started" not in log, ("nodes were started", log[-3000:])
 
 
+@pytest.mark.parametrize("file", ["fourws.launch.py", "controllers.launch.py"])
+def test_show_args_names_every_preset_and_where_the_clock_goes(ros2_env, domain_id, file):
+    """Issue 41, item 9: ``--show-args`` omitted improved_np30 and said /clock stays global,
+    where a namespaced simulation moves it (runner.clock_remap)."""
+    from fourws_bringup.core.configs import list_controllers
+
+    proc = _launch(ros2_env, domain_id, file, "--show-args")
+    text = _finish(proc, 120.0)
+    assert proc.returncode == 0, text[-3000:]
+    flat = " ".join(text.split())
+    for name in list_controllers():
+        assert name in flat, (name, flat[-3000:])
+    assert "/clock moves with it" in flat and "(/clock and /diagnostics stay global)" not in flat
+
+
 def test_the_control_stack_alone_drives_a_plant_in_its_namespace(ros2_env, domain_id, graph,
                                                                tmp_path):
     """``controllers.launch.py namespace:=car3 sync:=lockstep`` and a plant started by hand in

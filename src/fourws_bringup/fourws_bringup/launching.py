@@ -37,6 +37,7 @@ from launch_ros.actions import Node
 from fourws_common.exit_codes import describe
 
 from .core.conditions import IDEAL, load_condition
+from .core.configs import list_controllers
 from .runner import COMPOSE_LAYOUTS, RunError, control_specs, graph_specs
 from .supervisor import NodeSpec, dds_environment
 
@@ -139,10 +140,11 @@ def _common_arguments() -> list[Any]:
     return [
         *[SetEnvironmentVariable(k, v) for k, v in dds_environment().items()],
         DeclareLaunchArgument("controller", default_value="improved", description=(
-            "controller preset name (mpc_fws, mpc_4ws, improved, ampc_4ws, ampc_4ws_dyc, "
-            "lqr_ff) or a preset YAML path")),
+            f"controller preset name ({', '.join(list_controllers())}) or a preset YAML "
+            "path")),
         DeclareLaunchArgument("namespace", default_value="", description=(
-            "namespace of every node and its topics (/clock and /diagnostics stay global)")),
+            "namespace of every node and its topics; the simulation's /clock moves with it "
+            "(each simulated car has its own clock), /diagnostics stays global")),
         DeclareLaunchArgument("use_sim_time", default_value="false",
                               description="every node's clock follows /clock"),
         DeclareLaunchArgument("condition", default_value="", description=(
