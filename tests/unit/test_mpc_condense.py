@@ -72,7 +72,7 @@ def test_compiled_condensing_equals_the_numpy_forms(n, n_p, n_c, terms):
     want = _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W)
     Aa, Ba, da = Q.augment(Ak, Bk, dk)
     got = condense(Aa, Ba, da, np.concatenate([zeta, u_prev]), Q._OUT_ROWS, n_c, D, ref,
-                   q_eff, r_eff, u_prev, s_level, T.lateral_rows(n), Q._output_positions(n),
+                   q_eff, r_eff, u_prev, s_level, T.lateral_rows(n), T.output_index(n),
                    np.zeros((0, 0)) if W is None else W,
                    np.zeros(3) if W is None else T.reference_rows(ref, n))
     for name, a, b in zip(("H", "g", "th_out", "e_free", "th_hard", "hard_free"), got, want,

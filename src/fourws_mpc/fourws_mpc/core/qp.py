@@ -77,6 +77,7 @@ from fourws_mpc.core.qp_solver import (
 )
 from fourws_mpc.core.terminal_cost import (
     lateral_rows,
+    output_index,
     output_positions,
     reference_rows,
 )
@@ -293,14 +294,6 @@ class QpLayout:
         return np.vstack([top, eps_row, ub, hard, soft, soft])
 
 
-@lru_cache(maxsize=8)
-def _output_positions(n_state: int) -> np.ndarray:
-    """:func:`~fourws_mpc.core.terminal_cost.output_positions` as an index array."""
-    pos = np.array(output_positions(n_state), dtype=np.int64)
-    pos.flags.writeable = False
-    return pos
-
-
 def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows/cols of a pattern sorted into CSC storage order (column-major)."""
     order = np.lexsort((rows, cols))
@@ -363,7 +356,7 @@ class MpcQp:
         H, g, th_out, e_free, th_hard, hard_free = condense(
             Aa, Ba, da, xi, _OUT_ROWS, n_c, D, np.ascontiguousarray(ref, dtype=float),
             q_eff, r_eff, u_prev, _ZERO_U if s_level is None else s_level,
-            lateral_rows(n), _output_positions(n), W, z_ref)
+            lateral_rows(n), output_index(n), W, z_ref)
         qvec = np.concatenate([g, [0.0]])
         A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
         constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_max_t, u_prev,

@@ -91,9 +91,16 @@ def _velocity_form(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.nd
     return A_z, B_z
 
 
+@lru_cache(maxsize=8)
+def output_index(n_state: int) -> np.ndarray:
+    """:func:`output_positions` as a read-only index array (what the compiled kernels take)."""
+    pos = np.array(output_positions(n_state), dtype=np.int64)
+    pos.flags.writeable = False
+    return pos
+
+
 def _indices(n_state: int, enabled: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (lateral_rows(n_state), np.flatnonzero(enabled),
-            np.array(output_positions(n_state), dtype=np.int64))
+    return lateral_rows(n_state), np.flatnonzero(enabled), output_index(n_state)
 
 
 def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
