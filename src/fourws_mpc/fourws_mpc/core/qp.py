@@ -309,7 +309,6 @@ class MpcQp:
         self.settings = settings if settings is not None else QpSettings()
         self.solver: QpSolver = solver if solver is not None else DaqpSolver(self.settings)
         self.instances: dict[tuple[int, int], QpLayout] = {}
-        self._C: dict[int, np.ndarray] = {N_STATE: output_matrix()}   # per state dimension
 
     def instance(self, n_p: int, n_c: int) -> QpLayout:
         """The layout of (Np, Nc), created (and prepared in the solver) on first use."""
