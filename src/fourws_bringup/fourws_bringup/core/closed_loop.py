@@ -54,7 +54,7 @@ STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sid
 WHEEL_FIELDS = ("wheel_speed", "wheel_torque", "fx", "fy", "fz", "mu")
 MPC_FIELDS = ("delta_front", "delta_rear", "yaw_moment", "np", "nc", "q_y", "q_phi",
               "r_ddelta", "r_dmz", "lateral_error", "heading_error", "e_s", "k_e", "k_u",
-              "iterations", "slack", "fallback")
+              "iterations", "slack", "fallback", "mu_estimate", "yaw_moment_bound")
 
 
 @dataclass

@@ -20,7 +20,11 @@ from fourws_common.params import from_mapping, param
 from fourws_mpc.core.apcha import ApchaParams
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
-from fourws_mpc.core.prediction_model import DISCRETISATIONS, PREDICTION_MODELS
+from fourws_mpc.core.prediction_model import (
+    DISCRETISATIONS,
+    PREDICTION_MODELS,
+    RELAXATION_MODELS,
+)
 from fourws_mpc.core.qp_solver import QP_SOLVERS
 from fourws_mpc.core.reference import SEARCH_AHEAD, SEARCH_BACK, Reference
 
@@ -143,6 +147,26 @@ class MpcConfig:
     slip_ratio_rear: float = param(0.0, "S_r of eq. (1)", lo=-1.0, hi=1.0)
     min_speed_mps: float = param(1.0, "vx floor in the slip angles", lo=0.01, hi=50.0,
                                  unit="m/s")
+    # friction-aware prediction and grip envelope (docs/mpc.md, "Friction-aware prediction")
+    gravity_mps2: float = param(9.81, "gravity g", lo=1.0, hi=20.0, unit="m/s^2")
+    track_width_m: float = param(1.30, "track width B (front = rear)", lo=0.1, hi=5.0,
+                                 unit="m")
+    tyre_shape_lateral: float = param(1.3, "Magic Formula shape factor C of the axle tyre",
+                                      lo=1.01, hi=1.99)
+    tyre_curvature_lateral: float = param(-1.0, "Magic Formula curvature factor E of the "
+                                          "axle tyre", lo=-10.0, hi=0.99)
+    mu_floor: float = param(0.1, "μ estimate is clamped to at least this (and flagged)",
+                            lo=0.01, hi=1.0)
+    mu_ceiling: float = param(1.2, "μ estimate is clamped to at most this (and flagged)",
+                              lo=0.1, hi=3.0)
+    mu_evidence_deficit: float = param(
+        0.1, "an axle's force below its linear force K|α| by this share of its load is "
+        "evidence of its peak (grip.py)", lo=0.01, hi=1.0)
+    mu_fall_time_s: float = param(0.05, "time constant of a falling μ estimate", lo=1e-3,
+                                  hi=10.0, unit="s")
+    mu_rise_time_s: float = param(1.0, "time constant of a rising μ estimate, and of its "
+                                  "return to mu_default without evidence", lo=1e-3,
+                                  hi=100.0, unit="s")
     dt_s: float = param(0.01, "control period and prediction step T", lo=1e-4, hi=1.0,
                         unit="s")
     # beyond assumption (6) (docs/mpc.md, "Actuator-aware prediction", "Delay compensation")
@@ -218,14 +242,17 @@ class MpcConfig:
                 raise ValueError("nc_baseline: must lie in [nc_min, nc_max] with APCHA")
             if self.np_min // 3 < 1:
                 raise ValueError("np_min: ⌊np_min/3⌋ must be >= 1 for the N_c clamp of eq. (15)")
-        if self.prediction_model == "single_track_relaxation" and \
+        if self.mu_floor > self.mu_ceiling:
+            raise ValueError(f"mu_floor, mu_ceiling: need floor <= ceiling, got "
+                             f"{self.mu_floor}, {self.mu_ceiling}")
+        if self.prediction_model in RELAXATION_MODELS and \
                 self.prediction_discretisation == "euler":
             sigma = min(self.relaxation_length_front_m, self.relaxation_length_rear_m)
             raise ValueError(
                 "prediction_discretisation: the relaxation lag σ/vx is shorter than 2T above "
                 f"vx = {sigma / (2 * self.dt_s):.0f} m/s, where forward Euler oscillates or "
                 "diverges; use zoh with single_track_relaxation")
-        if (self.prediction_model in ("single_track_actuators", "single_track_relaxation")
+        if (self.prediction_model in ("single_track_actuators", *RELAXATION_MODELS)
                 and self.prediction_discretisation == "euler"):
             tau = min(self.steer_front_time_constant_s, self.steer_rear_time_constant_s)
             if tau < 2.0 * self.dt_s:
@@ -260,7 +287,10 @@ class MpcConfig:
             steer_front_time_constant_s=self.steer_front_time_constant_s,
             steer_rear_time_constant_s=self.steer_rear_time_constant_s,
             relaxation_length_front_m=self.relaxation_length_front_m,
-            relaxation_length_rear_m=self.relaxation_length_rear_m)
+            relaxation_length_rear_m=self.relaxation_length_rear_m,
+            gravity_mps2=self.gravity_mps2, track_width_m=self.track_width_m,
+            tyre_shape_lateral=self.tyre_shape_lateral,
+            tyre_curvature_lateral=self.tyre_curvature_lateral)
 
     @property
     def du_max(self) -> np.ndarray:

@@ -61,6 +61,16 @@ from fourws_mpc.core.delay import (
     register_schedule,
 )
 from fourws_mpc.core.fuzzy_weights import FuzzyWeights
+from fourws_mpc.core.grip import (
+    GripEstimate,
+    GripEstimator,
+    GripMemory,
+    GripSettings,
+    peak_slips,
+    steer_window,
+    yaw_moment_bound,
+)
+from fourws_mpc.core.friction_model import Grip
 from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_model
 from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution
@@ -91,13 +101,17 @@ class VehicleSample:
     yaw_rate: float
     steer_front: float = 0.0
     steer_rear: float = 0.0
+    ax: float = 0.0
+    ay: float = 0.0
 
     @classmethod
     def of(cls, obj: Any) -> VehicleSample:
         """The sample of an object with attributes x, y, yaw, vx, vy, yaw_rate, steer_front,
-        steer_rear."""
+        steer_rear and, if it has them, the measured accelerations ax, ay (m/s²; read by
+        the friction-aware model's μ estimate)."""
         return cls(float(obj.x), float(obj.y), float(obj.yaw), float(obj.vx), float(obj.vy),
-                   float(obj.yaw_rate), float(obj.steer_front), float(obj.steer_rear))
+                   float(obj.yaw_rate), float(obj.steer_front), float(obj.steer_rear),
+                   float(getattr(obj, "ax", 0.0)), float(getattr(obj, "ay", 0.0)))
 
 
 #: the fields of :class:`VehicleSample`, in order (what a node reads from its state message)
@@ -129,6 +143,18 @@ class _Weights:
 
 
 @dataclass(frozen=True, slots=True)
+class _GripStep:
+    """Stage 5's grip (friction-aware model only): μ̂, its memory, and the envelope."""
+
+    estimate: GripEstimate
+    memory: GripMemory
+    beta_max_rad: float
+    mz_max_nm: float
+    u_min: np.ndarray
+    u_max: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
 class _Prediction:
     zeta: np.ndarray
     ref_out: np.ndarray
@@ -136,6 +162,7 @@ class _Prediction:
     Bk: np.ndarray
     dk: np.ndarray
     memory: Any = None
+    grip: _GripStep | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,6 +190,9 @@ class MpcResult:
     fallback: bool
     ref_index: int = 0
     ref_speed: float = 0.0
+    mu_estimate: float = math.nan
+    yaw_moment_bound: float = math.nan
+    grip_note: str = ""
 
 
 def initial_state(model: PredictionModel, s: VehicleSample, ref: Reference,
@@ -242,6 +272,11 @@ class MpcController:
         self._du_max = c.du_max
         self._u_max = c.u_max
         self._enabled = c.enabled
+        self._grip = (GripEstimator(c.model_params(), GripSettings(
+            prior=c.mu_default, floor=c.mu_floor, ceiling=c.mu_ceiling,
+            evidence_deficit=c.mu_evidence_deficit, fall_time_s=c.mu_fall_time_s,
+            rise_time_s=c.mu_rise_time_s))
+            if getattr(self.model, "grip_aware", False) else None)
 
     def update_config(self, cfg: MpcConfig) -> None:
         """Apply a new configuration to the running controller without losing its state.
@@ -293,6 +328,7 @@ class MpcController:
         self.ref_hint: int | None = None
         self._ref: Reference | None = None
         self.model_memory: Any = None
+        self.grip_memory: GripMemory | None = None
 
     def step(self, t_s: float, state: VehicleSample, ref: Reference, mu: float | None = None
              ) -> MpcResult:
@@ -307,7 +343,7 @@ class MpcController:
         err = self._errors(meas, ref)
         w = self._weights(err)
         hz = self._horizons(err)
-        pred = self._prediction(meas, ref, err, hz)
+        pred = self._prediction(meas, ref, err, hz, mu)
         sol = self._solve(meas, mu, pred, hz, w)
         return self._result(ref, err, w, hz, sol, pred)
 
@@ -353,14 +389,16 @@ class MpcController:
         k_u = float(np.max(np.abs(self.du_last) / self._du_max))
         return _Horizons(c.np_baseline, c.nc_baseline, e_s, k_e, k_u)
 
-    def _prediction(self, s: VehicleSample, ref: Reference, err: _Errors, hz: _Horizons
-                    ) -> _Prediction:
-        """Stage 5: ζ0 in the prediction frame (with the model's appended states), eq. (4) at
-        ζ0; with known delays ζ0 predicted over them (``delay``); the reference outputs from
-        the delayed point on."""
+    def _prediction(self, s: VehicleSample, ref: Reference, err: _Errors, hz: _Horizons,
+                    mu: float | None) -> _Prediction:
+        """Stage 5: ζ0 in the prediction frame (with the model's appended states); with the
+        friction-aware model the grip (μ̂ and its envelope, ``grip``); eq. (4) at ζ0; with
+        known delays ζ0 predicted over them (``delay``); the reference outputs from the
+        delayed point on."""
         c = self.cfg
         zeta, memory = initial_state(self.model, s, ref, err.near, c.prediction_frame,
                                      self.model_memory, c.dt_s)
+        grip = None if self._grip is None else self._grip_step(zeta, s, mu)
         n_d = self._n_delay
         phi_ref, y_ref = ref.horizon(err.near, s.vx, c.dt_s, hz.n_p + n_d, s.yaw,
                                      c.prediction_frame)
@@ -368,7 +406,30 @@ class MpcController:
         if n_d:
             zeta = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
         return _Prediction(zeta, np.column_stack([phi_ref[n_d:], y_ref[n_d:]]), Ak, Bk, dk,
-                           memory)
+                           memory, grip)
+
+    def _grip_step(self, zeta: np.ndarray, s: VehicleSample, mu: float | None) -> _GripStep:
+        """μ̂ (``grip``), the model's road for this step, and the envelope it gives."""
+        c, p = self.cfg, self.model.params
+        mz = float(self.u_prev[InputIdx.MZ])
+        est, mem = self._grip.estimate(zeta, s.ax, s.ay, mz, mu, self.grip_memory, c.dt_s)
+        self.model.grip = Grip(est.mu, s.ax)
+        vxb = max(s.vx, c.min_speed_mps)
+        r_max = c.yaw_rate_mu_factor * est.mu * G / vxb
+        beta = min(math.radians(c.max_sideslip_deg),
+                   peak_slips(p, est.mu)[1] + p.b_m * r_max / vxb)
+        mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, s.ax))
+        lo, hi = -self._u_max.copy(), self._u_max.copy()
+        hi[InputIdx.MZ] = mz_max
+        lo[InputIdx.MZ] = -mz_max
+        w_lo, w_hi = steer_window(s.vx, s.vy, s.yaw_rate, p, est.mu)
+        steer = [InputIdx.DF, InputIdx.DR]
+        lo[steer] = np.minimum(np.maximum(w_lo, lo[steer]), hi[steer])
+        hi[steer] = np.maximum(np.minimum(w_hi, hi[steer]), lo[steer])
+        # reachable from u(k−1) within one increment: the QP stays feasible
+        lo = np.minimum(lo, self.u_prev + self._du_max)
+        hi = np.maximum(hi, self.u_prev - self._du_max)
+        return _GripStep(est, mem, beta, mz_max, lo, hi)
 
     def _solve(self, s: VehicleSample, mu: float | None, pred: _Prediction, hz: _Horizons,
                w: _Weights) -> QpSolution:
@@ -376,11 +437,14 @@ class MpcController:
         c = self.cfg
         vxb = max(s.vx, c.min_speed_mps)
         mu_b = c.mu_default if mu is None else max(float(mu), 0.01)
+        beta_max, u_max = math.radians(c.max_sideslip_deg), self._u_max
+        if pred.grip is not None:          # the envelope of the estimated grip
+            mu_b, beta_max = pred.grip.estimate.mu, pred.grip.beta_max_rad
         bounds = QpBounds(
-            du_max=self._du_max, u_max=self._u_max, enabled=self._enabled,
+            du_max=self._du_max, u_max=u_max if pred.grip is None else pred.grip.u_max,
+            u_min=None if pred.grip is None else pred.grip.u_min, enabled=self._enabled,
             # "no worse than now": where the QP starts, i.e. after a compensated delay
-            vy_max=max(vxb * math.tan(math.radians(c.max_sideslip_deg)), abs(s.vy),
-                       abs(pred.zeta[StateIdx.VY])),
+            vy_max=max(vxb * math.tan(beta_max), abs(s.vy), abs(pred.zeta[StateIdx.VY])),
             r_max=max(c.yaw_rate_mu_factor * mu_b * G / vxb, abs(s.yaw_rate),
                       abs(pred.zeta[StateIdx.R])),
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
@@ -425,6 +489,9 @@ class MpcController:
             fallback = True
             u = self._fallback_input()
         u = np.where(self._enabled, np.minimum(np.maximum(u, -self._u_max), self._u_max), 0.0)
+        g = pred.grip
+        if g is not None and fallback:     # a held plan obeys the grip's bounds
+            u = np.where(self._enabled, np.minimum(np.maximum(u, g.u_min), g.u_max), 0.0)
         # the step's history is committed only here: a step that raised changed nothing
         self.du_last = u - self.u_prev
         self.u_prev = u
@@ -432,6 +499,8 @@ class MpcController:
         self.n_p, self.n_c = hz.n_p, hz.n_c
         self.e_s_prev = hz.e_s
         self.model_memory = pred.memory
+        if g is not None:
+            self.grip_memory = g.memory
         self._ref, self.ref_hint = ref, err.near.index
         return MpcResult(
             delta_front=float(u[InputIdx.DF]), delta_rear=float(u[InputIdx.DR]),
@@ -440,7 +509,10 @@ class MpcController:
             r_dmz=w.r_dmz, lateral_error=float(err.e_y), heading_error=float(err.e_phi),
             e_s=float(hz.e_s), k_e=float(hz.k_e), k_u=float(hz.k_u),
             solver_status=sol.status, iterations=sol.iterations, slack=float(sol.slack),
-            fallback=fallback, ref_index=err.near.index, ref_speed=err.near.speed)
+            fallback=fallback, ref_index=err.near.index, ref_speed=err.near.speed,
+            mu_estimate=math.nan if g is None else g.estimate.mu,
+            yaw_moment_bound=math.nan if g is None else g.mz_max_nm,
+            grip_note="" if g is None else g.estimate.note)
 
     # -- plan memory ----------------------------------------------------------------------
     def _warm(self, n_c: int) -> np.ndarray | None:

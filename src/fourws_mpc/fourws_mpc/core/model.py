@@ -94,6 +94,11 @@ class ModelParams:
     #: model only (``relaxation_model``); eq. (1)'s tyre forces act at once
     relaxation_length_front_m: float = 0.2199
     relaxation_length_rear_m: float = 0.1995
+    #: the friction-aware model's (``friction_model``): g, track B, axle tyre's MF C and E
+    gravity_mps2: float = 9.81
+    track_width_m: float = 1.30
+    tyre_shape_lateral: float = 1.3
+    tyre_curvature_lateral: float = -1.0
 
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:

@@ -31,7 +31,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from fourws_common.params import choose
-from fourws_mpc.core import actuator_model, relaxation_model
+from fourws_mpc.core import actuator_model, friction_model, relaxation_model
 from fourws_mpc.core.model import N_STATE, ModelParams, affine_euler, affine_zoh, jacobians
 
 __all__ = ["affine_euler", "affine_zoh"]  # the discretisations live in model.py
@@ -135,12 +135,36 @@ class SingleTrackRelaxationModel(_Discretised):
         return z, memory
 
 
+class SingleTrackFrictionModel(SingleTrackRelaxationModel):
+    """The relaxation model with saturating axle forces whose peaks follow the road and the
+    friction ellipse (``friction_model``). The road is :attr:`grip`, which the controller
+    sets from its μ estimate and the measured a_x before each :meth:`discretise`."""
+
+    name = "single_track_friction"
+    grip_aware = True
+
+    def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
+        super().__init__(params, discretisation)
+        self.grip = friction_model.Grip()
+
+    def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A_k, B_k, d_k) of the friction-aware model at :attr:`grip`, (10, 10), (10, 3),
+        (10,)."""
+        return self._disc(*friction_model.jacobians(zeta, u, self.params, self.grip), zeta,
+                          u, dt_s)
+
+
+#: the models whose state holds the transient slips α' (``relaxation_model.RelaxIdx``)
+RELAXATION_MODELS = ("single_track_relaxation", "single_track_friction")
+
 #: model name (parameter ``prediction_model``) -> factory from the model parameters and the
 #: discretisation (parameter ``prediction_discretisation``)
 PREDICTION_MODELS: dict[str, Callable[..., PredictionModel]] = {
     "single_track": SingleTrackModel,
     "single_track_actuators": SingleTrackActuatorModel,
     "single_track_relaxation": SingleTrackRelaxationModel,
+    "single_track_friction": SingleTrackFrictionModel,
 }
 
 

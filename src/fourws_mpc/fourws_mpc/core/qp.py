@@ -215,6 +215,11 @@ class QpBounds:
     band_y: float                # m, soft
     state_bounds: bool = True
     state_bounds_from_step: int = 1   # first prediction step i (1-based) with the hard bounds
+    u_min: np.ndarray | None = None   # (3,) lower bound on u; None: −u_max
+
+    def lower(self) -> np.ndarray:
+        """The lower bound on u (3,): ``u_min``, or −``u_max``."""
+        return -self.u_max if self.u_min is None else self.u_min
 
 
 @dataclass
@@ -265,14 +270,17 @@ class QpLayout:
         self._tiled_key: tuple | None = None
         self._tiled: tuple[np.ndarray, ...] = ()
 
-    def tiled(self, b: QpBounds) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(D, enabled, u_max, band) repeated over the horizon; cached while unchanged."""
-        key = (b.du_max.tobytes(), b.u_max.tobytes(), b.enabled.tobytes(), b.band_phi,
-               b.band_y)
+    def tiled(self, b: QpBounds
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(D, enabled, u_min, u_max, band) repeated over the horizon; cached while
+        unchanged."""
+        lower = b.lower()
+        key = (b.du_max.tobytes(), b.u_max.tobytes(), lower.tobytes(), b.enabled.tobytes(),
+               b.band_phi, b.band_y)
         if key != self._tiled_key:
             self._tiled = (np.tile(b.du_max, self.n_c), np.tile(b.enabled.astype(float),
                                                                  self.n_c),
-                           np.tile(b.u_max, self.n_c),
+                           np.tile(lower, self.n_c), np.tile(b.u_max, self.n_c),
                            np.tile([b.band_phi, b.band_y], self.n_p))
             self._tiled_key = key
         return self._tiled  # type: ignore[return-value]
@@ -347,7 +355,7 @@ class MpcQp:
         n = Ak.shape[0]
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
-        D, en, u_max_t, band = inst.tiled(bounds)
+        D, en, u_min_t, u_max_t, band = inst.tiled(bounds)
         if terminal_w is None:
             W, z_ref = _NO_TERMINAL, _ZERO_U
         else:
@@ -358,8 +366,8 @@ class MpcQp:
             lateral_rows(n), output_index(n), W, z_ref)
         qvec = np.concatenate([g, [0.0]])
         A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
-        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_max_t, u_prev,
-                    band, float(bounds.vy_max), float(bounds.r_max), bool(bounds.state_bounds),
+        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_min_t, u_max_t,
+                    u_prev, band, float(bounds.vy_max), float(bounds.r_max), bool(bounds.state_bounds),
                     int(bounds.state_bounds_from_step))
 
         warm = None
@@ -376,6 +384,6 @@ class MpcQp:
         dus = _clip(x[:ncol], -en, en).reshape(n_c, nu)
         du = dus * bounds.du_max[None, :]
         u = _clip(u_prev[None, :] + np.cumsum(du, axis=0),
-                  -bounds.u_max[None, :], bounds.u_max[None, :])
+                  bounds.lower()[None, :], bounds.u_max[None, :])
         return QpSolution(True, res.detail, res.iterations, du, u, max(float(x[-1]), 0.0),
                           dus, res.status)

@@ -1,0 +1,126 @@
+"""Friction-aware prediction model: the relaxation model with saturating axle forces.
+
+Beyond the paper (docs/mpc.md, "Friction-aware prediction"). The state and input are those of
+``relaxation_model``; each axle's lateral force is the Magic Formula of ``axle_tyre`` on its
+transient slip α' instead of eq. (1)'s C α'::
+
+    F_f = F(α'f; 2 C_cf, D_f),   F_r = F(α'r; 2 C_cr, D_r)
+    v̇y = (F_f + F_r)/m − vx r
+    v̇x = 2/m [C_lf S_f + C_lr S_r] − (F_f δf,act + F_r δr,act)/m + vy r
+    ṙ  = (a F_f − b F_r)/Iz + Mz/Iz
+
+The peaks follow the estimated road and the friction ellipse. Static axle loads
+F_z,f = m g b/L and F_z,r = m g a/L. The yaw moment's longitudinal forces, shared by load as
+the load-ratio allocation does (eq. 25-31), use the same fraction of every wheel's grip on one
+side: η_R,L = (a_x ± 2 Mz/(B m))/(μ̂ g) with a_x the measured drive. So::
+
+    D = μ̂ F_z ε(Mz),   ε = ½ [√(1 − η_L²) + √(1 − η_R²)]        (friction ellipse)
+
+Linearised at (ζ0, u0) each step, the prediction sees the tyre's falling stiffness beyond its
+peak and that a yaw moment costs lateral grip (successive linearisation, Falcone et al. 2007).
+Jacobians are exact (tested against central finite differences of :func:`dynamics`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fourws_mpc.core import relaxation_model
+from fourws_mpc.core.actuator_model import ActIdx
+from fourws_mpc.core.axle_tyre import force
+from fourws_mpc.core.model import InputIdx, ModelParams, StateIdx
+from fourws_mpc.core.relaxation_model import RelaxIdx
+
+N_STATE_FRICTION = relaxation_model.N_STATE_RELAX
+#: |η| of one side is capped here: keeps √(1 − η²) and its slope finite
+ETA_MAX = 0.99
+
+
+@dataclass(frozen=True, slots=True)
+class Grip:
+    """The road the prediction assumes at one step: μ̂ and the measured a_x (m/s²)."""
+
+    mu: float = 1.0
+    ax_mps2: float = 0.0
+
+
+def axle_loads(p: ModelParams) -> tuple[float, float]:
+    """Static (F_z,f, F_z,r), N."""
+    w = p.mass_kg * p.gravity_mps2
+    length = p.a_m + p.b_m
+    return w * p.b_m / length, w * p.a_m / length
+
+
+def ellipse(mz: float, p: ModelParams, g: Grip) -> tuple[float, float]:
+    """(ε, ∂ε/∂Mz) of the module docstring."""
+    cap = max(g.mu, 1e-3) * p.gravity_mps2
+    k = 2.0 / (p.track_width_m * p.mass_kg * cap)
+    eta_d = g.ax_mps2 / cap
+    eps, deps = 0.0, 0.0
+    for sign in (1.0, -1.0):
+        eta = eta_d + sign * k * mz
+        if abs(eta) >= ETA_MAX:
+            eta, slope = math.copysign(ETA_MAX, eta), 0.0
+        else:
+            slope = sign * k
+        root = math.sqrt(1.0 - eta * eta)
+        eps += 0.5 * root
+        deps -= 0.5 * eta / root * slope
+    return eps, deps
+
+
+def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
+                ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
+    """((F, ∂F/∂α', ∂F/∂Mz) front, the same rear, ε) at ζ_t."""
+    eps, deps = ellipse(mz, p, g)
+    out = []
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+        peak = g.mu * fz
+        f, df_da, df_dd = force(float(alpha), 2.0 * c, peak * eps, p.tyre_shape_lateral,
+                                p.tyre_curvature_lateral)
+        out.append((f, df_da, df_dd * peak * deps))
+    return out[0], out[1], eps
+
+
+def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
+    """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
+    S = StateIdx
+    out = relaxation_model.dynamics(zeta, u, p)
+    (ff, _, _), (fr, _, _), _ = axle_forces(zeta, float(u[InputIdx.MZ]), p, g)
+    vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
+    m, iz = p.mass_kg, p.yaw_inertia_kg_m2
+    out[S.VY] = (ff + fr) / m - vx * r
+    out[S.VX] = (2.0 * (p.c_lf * p.slip_front + p.c_lr * p.slip_rear)
+                 - ff * zeta[ActIdx.DF_ACT] - fr * zeta[ActIdx.DR_ACT]) / m + vy * r
+    out[S.R] = (p.a_m * ff - p.b_m * fr + u[InputIdx.MZ]) / iz
+    return out
+
+
+def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact ``(f, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u): the relaxation model's rows of
+    the positions, actuators and slips, and the tyre rows of the module docstring."""
+    S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
+    _, A, B = relaxation_model.jacobians(zeta, u, p)
+    f = dynamics(zeta, u, p, g)
+    (ff, dff, mzf), (fr, dfr, mzr), _ = axle_forces(zeta, float(u[I.MZ]), p, g)
+    vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
+    df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]
+    m, iz, a, b = p.mass_kg, p.yaw_inertia_kg_m2, p.a_m, p.b_m
+    for row in (S.VY, S.VX, S.R):
+        A[row, :] = 0.0
+        B[row, :] = 0.0
+    A[S.VY, S.VX], A[S.VY, S.R] = -r, -vx
+    A[S.VY, R_.ALPHA_F], A[S.VY, R_.ALPHA_R] = dff / m, dfr / m
+    B[S.VY, I.MZ] = (mzf + mzr) / m
+    A[S.VX, S.VY], A[S.VX, S.R] = r, vy
+    A[S.VX, A_.DF_ACT], A[S.VX, A_.DR_ACT] = -ff / m, -fr / m
+    A[S.VX, R_.ALPHA_F], A[S.VX, R_.ALPHA_R] = -dff * df / m, -dfr * dr / m
+    B[S.VX, I.MZ] = -(mzf * df + mzr * dr) / m
+    A[S.R, R_.ALPHA_F], A[S.R, R_.ALPHA_R] = a * dff / iz, -b * dfr / iz
+    B[S.R, I.MZ] = (1.0 + a * mzf - b * mzr) / iz
+    return f, A, B

@@ -1,0 +1,182 @@
+"""The road's grip as the MPC sees it: a μ estimate and the envelope it gives
+(docs/mpc.md, "Friction-aware prediction").
+
+**Estimate.** When the state carries μ (the idealised world: the plant's truth) it is used.
+Otherwise μ̂ comes from what a car measures: the transient slips α̂' of the slip observer,
+a_y, and the yaw rate r. The axle forces follow from the lateral and yaw balances::
+
+    F_f = (b m a_y + I_z ṙ − M_z)/L,   F_r = (a m a_y − I_z ṙ + M_z)/L
+
+with ṙ the filtered difference of r and M_z the yaw moment last applied. An axle whose
+force is clearly below its linear force (K|α̂'| − |F| ≥ ``mu_evidence_deficit`` F_z, well
+above the force estimate's noise) has shown its peak: ``axle_tyre.peak_from_force`` gives D, and μ = D/(F_z ε). The lowest axle's μ is the
+evidence. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
+``mu_rise_time_s``, and without evidence (linear tyres say nothing of the peak) returns to
+the prior ``mu_default`` with ``mu_rise_time_s``. μ̂ is never below the grip in use,
+√(a_x² + a_y²)/g, and is clamped to [``mu_floor``, ``mu_ceiling``]; a clamp is flagged.
+
+**Envelope** (Beal and Gerdes 2013), from μ̂:
+
+* yaw rate |r| ≤ ``yaw_rate_mu_factor`` μ̂ g / v_x (as before, now with μ̂);
+* sideslip |β| ≤ α_peak,r + b r_max / v_x, with α_peak,r the rear axle's peak slip angle
+  (``max_sideslip_deg`` stays the upper cap);
+* steer: each axle's kinematic slip at the current state within its peak slip
+  (:func:`steer_window`), since a steer beyond it only lowers the force;
+* yaw moment |M_z| ≤ (B/2) μ̂ m g (√(1 − η_y²) − |a_x|/(μ̂ g)): the longitudinal grip the
+  wheels have left at the lateral use η_y = max |F(α̂')|/D of the two axles (friction ellipse).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fourws_mpc.core.axle_tyre import force, peak_from_force
+from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse
+from fourws_mpc.core.model import ModelParams, StateIdx
+from fourws_mpc.core.relaxation_model import RelaxIdx
+
+#: filter time constant of the yaw acceleration ṙ (s)
+RDOT_FILTER_S = 0.05
+#: flag values of :attr:`GripEstimate.note`
+CLAMPED_LOW = "mu estimate clamped to mu_floor"
+CLAMPED_HIGH = "mu estimate clamped to mu_ceiling"
+
+
+@dataclass(frozen=True, slots=True)
+class GripSettings:
+    """The estimator's constants (``MpcConfig``'s keys of the same names)."""
+
+    prior: float = 1.0
+    floor: float = 0.1
+    ceiling: float = 1.2
+    evidence_deficit: float = 0.1
+    fall_time_s: float = 0.05
+    rise_time_s: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class GripMemory:
+    """What the estimator carries to the next step: μ̂, r and the filtered ṙ."""
+
+    mu: float
+    yaw_rate: float
+    yaw_accel: float
+
+
+@dataclass(frozen=True, slots=True)
+class GripEstimate:
+    """μ̂ at one step, where it came from (state, evidence, prior) and any clamp note."""
+
+    mu: float
+    source: str
+    note: str = ""
+
+
+def _pole(dt_s: float, tau_s: float) -> float:
+    return 1.0 - math.exp(-dt_s / tau_s)
+
+
+class GripEstimator:
+    """μ̂ of the module docstring. Pure: :meth:`estimate` returns the next memory."""
+
+    def __init__(self, params: ModelParams, settings: GripSettings) -> None:
+        self.p = params
+        self.s = settings
+
+    def _clamp(self, mu: float) -> tuple[float, str]:
+        if not math.isfinite(mu) or mu < self.s.floor:
+            return self.s.floor, CLAMPED_LOW
+        if mu > self.s.ceiling:
+            return self.s.ceiling, CLAMPED_HIGH
+        return mu, ""
+
+    def evidence(self, zeta: np.ndarray, ay: float, yaw_accel: float, mz: float,
+                 mu_now: float, ax: float) -> float | None:
+        """The lowest μ an axle shows (module docstring), or None."""
+        p = self.p
+        length = p.a_m + p.b_m
+        iz_rdot = p.yaw_inertia_kg_m2 * yaw_accel
+        f_axle = ((p.b_m * p.mass_kg * ay + iz_rdot - mz) / length,
+                  (p.a_m * p.mass_kg * ay - iz_rdot + mz) / length)
+        eps, _ = ellipse(mz, p, Grip(mu_now, ax))
+        best = None
+        for alpha, f, c, fz in zip((zeta[RelaxIdx.ALPHA_F], zeta[RelaxIdx.ALPHA_R]), f_axle,
+                                   (p.c_cf, p.c_cr), axle_loads(p), strict=True):
+            d = peak_from_force(float(alpha), f, 2.0 * c, p.tyre_shape_lateral,
+                                p.tyre_curvature_lateral, self.s.evidence_deficit * fz)
+            if d is not None:
+                mu = d / (fz * max(eps, 1e-3))
+                best = mu if best is None else min(best, mu)
+        return best
+
+    def estimate(self, zeta: np.ndarray, ax: float, ay: float, mz: float,
+                 mu_state: float | None, memory: GripMemory | None, dt_s: float
+                 ) -> tuple[GripEstimate, GripMemory]:
+        """μ̂ at the measured ζ_t (with the observer's α̂'), the measured a_x, a_y (m/s²),
+        the yaw moment last applied (N·m) and the state's μ (None: not measured)."""
+        r = float(zeta[StateIdx.R])
+        if memory is None or dt_s <= 0.0:
+            rdot = 0.0 if memory is None else memory.yaw_accel
+            mu_prev = self.s.prior if memory is None else memory.mu
+        else:
+            raw = (r - memory.yaw_rate) / dt_s
+            rdot = memory.yaw_accel + _pole(dt_s, RDOT_FILTER_S) * (raw - memory.yaw_accel)
+            mu_prev = memory.mu
+        if mu_state is not None:
+            mu, note = self._clamp(float(mu_state))
+            return GripEstimate(mu, "state", note), GripMemory(mu, r, rdot)
+        ev = self.evidence(zeta, ay, rdot, mz, mu_prev, ax)
+        target = self.s.prior if ev is None else ev
+        tau = self.s.fall_time_s if target < mu_prev else self.s.rise_time_s
+        mu = mu_prev + (_pole(dt_s, tau) if dt_s > 0.0 else 0.0) * (target - mu_prev)
+        used = math.hypot(ax, ay) / self.p.gravity_mps2
+        mu, note = self._clamp(max(mu, used) if math.isfinite(used) else mu)
+        return (GripEstimate(mu, "prior" if ev is None else "evidence", note),
+                GripMemory(mu, r, rdot))
+
+
+def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:
+    """(α_peak,f, α_peak,r) of the axles (rad): u* C D/K with u* the MF peak argument."""
+    c, e = p.tyre_shape_lateral, p.tyre_curvature_lateral
+    target = math.tan(math.pi / (2.0 * c))
+    lo, hi = 0.0, 50.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if mid - e * (mid - math.atan(mid)) < target:
+            lo = mid
+        else:
+            hi = mid
+    u_star = 0.5 * (lo + hi)
+    fz_f, fz_r = axle_loads(p)
+    return (u_star * c * mu * fz_f / (2.0 * p.c_cf), u_star * c * mu * fz_r / (2.0 * p.c_cr))
+
+
+def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) road-wheel angles (rad, front and rear) that keep each axle's
+    kinematic slip α = δ − (v_y ± l r)/v_x within its peak slip at μ̂: steering beyond the
+    peak gives no more force (module docstring)."""
+    vxs = max(vx, p.min_speed_mps)
+    kin = np.array([(vy + p.a_m * r) / vxs, (vy - p.b_m * r) / vxs])
+    peak = np.array(peak_slips(p, mu))
+    return kin - peak, kin + peak
+
+
+def lateral_use(zeta: np.ndarray, p: ModelParams, mu: float) -> float:
+    """η_y = max over the axles of |F(α̂')|/D at μ̂ (no longitudinal force)."""
+    use = 0.0
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+        d = mu * fz
+        f = force(float(alpha), 2.0 * c, d, p.tyre_shape_lateral, p.tyre_curvature_lateral)[0]
+        use = max(use, abs(f) / d)
+    return min(use, 1.0)
+
+
+def yaw_moment_bound(zeta: np.ndarray, p: ModelParams, mu: float, ax: float) -> float:
+    """|M_z| the wheels' spare longitudinal grip can give (N·m, module docstring)."""
+    spare = math.sqrt(1.0 - lateral_use(zeta, p, mu) ** 2) - abs(ax) / (mu * p.gravity_mps2)
+    return max(0.0, 0.5 * p.track_width_m * mu * p.mass_kg * p.gravity_mps2 * spare)
