@@ -127,6 +127,7 @@ def run_job(job: Job) -> dict[str, Any]:
     from threadpoolctl import threadpool_limits
 
     from .core.closed_loop import run_closed_loop
+    from .core.limit_metrics import limit_metrics
 
     row: dict[str, Any] = dict(zip(LEAD, job.key, strict=True))
     try:
@@ -138,6 +139,7 @@ def run_job(job: Job) -> dict[str, Any]:
         row.update(m)
         row["steps"] = log.steps
         row.update(activity(log))
+        row.update(limit_metrics(log, *_allocator_geometry(job)))
         for key in ("np", "nc"):
             v = log.mpc[key]
             row[f"{key}_min"], row[f"{key}_max"] = (int(v.min()), int(v.max())) if len(v) else \
@@ -151,6 +153,15 @@ def run_job(job: Job) -> dict[str, Any]:
         row["reason"] = f"raised {type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def _allocator_geometry(job: Job) -> tuple[float, float]:
+    """(B, R) of the job's allocator, for the delivered yaw moment and drive force."""
+    from .core.configs import load_allocator_config
+
+    cfg = load_allocator_config(job.controller,
+                                node_parameters(job.condition)["allocator_node"])
+    return cfg.track_width_m, cfg.wheel_radius_m
 
 
 #: seconds at the end of a run over which :func:`activity` measures the settled yaw rate (the

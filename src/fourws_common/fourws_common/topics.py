@@ -114,7 +114,8 @@ MPC_DIAGNOSTICS = Topic("/control/mpc_diagnostics", "fourws_msgs/msg/MpcDiagnost
 DRIVE_COMMAND = Topic("/control/drive_command", "fourws_msgs/msg/DriveCommand", "control",
                       "the speed PID's total drive torque, to the allocator")
 WHEEL_TORQUES = Topic("/control/wheel_torques", "fourws_msgs/msg/WheelTorques", "control",
-                      "the allocator's four wheel torques, to the plant")
+                      "the allocator's four wheel torques and unmet demand, to the plant (and "
+                      "the unmet yaw moment back to the MPC)")
 RUN_STATUS = Topic("/run/status", "std_msgs/msg/String", "latched",
                    "the plant's run state as JSON (start, heartbeats, end), for the runner "
                    "and the bag")

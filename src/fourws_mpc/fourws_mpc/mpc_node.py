@@ -1,7 +1,9 @@
 """MPC node: the online parameter-reconfigured MPC on the ROS graph.
 
-Subscribes ``/vehicle/state`` (newest only, :data:`~fourws_common.qos.LATEST_QOS`) and
-``/reference/trajectory``; publishes ``/control/mpc_command`` and ``/control/mpc_diagnostics``
+Subscribes ``/vehicle/state`` (newest only, :data:`~fourws_common.qos.LATEST_QOS`),
+``/reference/trajectory`` and ``/control/wheel_torques`` (the allocator's unmet yaw moment for
+the command it answered: the next step starts from the yaw moment delivered,
+``MpcController.report_delivered``); publishes ``/control/mpc_command`` and ``/control/mpc_diagnostics``
 for every new state, stamped like it. All control logic lives in
 ``fourws_mpc.core.controller``; this node converts messages, measures the wall time of each
 controller step for the diagnostics, and guards its input:
@@ -28,6 +30,7 @@ stale).
 
 from __future__ import annotations
 
+import math
 import time
 
 from rclpy.node import Node
@@ -42,12 +45,19 @@ from fourws_common.topics import (
     MPC_COMMAND,
     MPC_DIAGNOSTICS,
     REFERENCE_TRAJECTORY,
+    WHEEL_TORQUES,
 )
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MEAS_FIELDS, VehicleSample
 from fourws_mpc.core.laws import make_controller, warm_up
 from fourws_mpc.core.reference import Reference
-from fourws_msgs.msg import MpcCommand, MpcDiagnostics, ReferenceTrajectory, VehicleState
+from fourws_msgs.msg import (
+    MpcCommand,
+    MpcDiagnostics,
+    ReferenceTrajectory,
+    VehicleState,
+    WheelTorques,
+)
 
 CHECKED_FIELDS = (*MEAS_FIELDS, "mu")
 
@@ -71,6 +81,9 @@ class MpcNode(Node):
         self.create_subscription(ReferenceTrajectory, REFERENCE_TRAJECTORY.ros_name,
                                  self.health.guard(REFERENCE_TRAJECTORY.name, self._on_ref),
                                  qos_of(REFERENCE_TRAJECTORY))
+        self.create_subscription(WheelTorques, WHEEL_TORQUES.ros_name,
+                                 self.health.guard(WHEEL_TORQUES.name, self._on_torques),
+                                 qos_of(WHEEL_TORQUES))
         self.state_input = StateInput(
             self, self.health, CHECKED_FIELDS,
             StateHandlers(ready=lambda: self.ref is not None, step=self._step,
@@ -134,6 +147,17 @@ class MpcNode(Node):
                                + ("; new run: controller reset" if new_run else ""))
         self.state_input.retry_waiting()
 
+    def _on_torques(self, msg: WheelTorques) -> None:
+        """The allocator's answer to our last command: start the next step from the yaw
+        moment it delivered. Another stamp (an older command) or a non-finite value is
+        ignored; the allocator reports its own rejections."""
+        unmet = float(msg.unmet_yaw_moment)
+        if (self.cached is None or not unmet or not math.isfinite(unmet)
+                or msg.header.stamp != self.cached[0].header.stamp
+                or not hasattr(self.ctrl, "report_delivered")):
+            return
+        self.ctrl.report_delivered(self.cached[0].yaw_moment - unmet)
+
     def _reset(self) -> None:
         self.ctrl.reset()
         self.state_input.reset()
@@ -164,6 +188,9 @@ class MpcNode(Node):
         diag.solve_time_ms, diag.solver_status = solve_ms, res.solver_status
         diag.iterations, diag.slack = int(res.iterations), res.slack
         diag.fallback = bool(res.fallback)
+        diag.mu_estimate, diag.yaw_moment_bound = res.mu_estimate, res.yaw_moment_bound
+        if res.grip_note:
+            self.health.reject("mu_estimate", stamp_ns, f"{res.grip_note} at {stamp_ns} ns")
         if res.fallback:
             self.health.reject("solver_fallback", stamp_ns, f"solver '{res.solver_status}' at "
                                f"{stamp_ns} ns: used the previous plan")

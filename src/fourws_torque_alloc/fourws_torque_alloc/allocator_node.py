@@ -94,8 +94,11 @@ class AllocatorNode(Node):
         self.gate = StampGate(MAX_STAMP_JUMP_NS, TIMELINE_QUIET_NS)  # on the state stamps
         self.health = NodeHealth(self)
         self._last_input: float | None = None
+        self._unmet = (0.0, 0.0)            # the last step's unmet F_x (N) and M_z (N·m)
         self.health.runtime(lambda: with_input_age(
-            Runtime(values={"method": self.params.config.method}),
+            Runtime(values={"method": self.params.config.method,
+                            "unmet_fx_n": f"{self._unmet[0]:.1f}",
+                            "unmet_mz_nm": f"{self._unmet[1]:.1f}"}),
             None if self._last_input is None else time.monotonic() - self._last_input,
             VEHICLE_STATE.name))
         self._match_log = RateLimitedLog(self.get_logger().info, period_s=5.0)
@@ -247,6 +250,8 @@ class AllocatorNode(Node):
                 raise ValueError(f"allocation gave non-finite torques {torque.tolist()}")
             out.unmet_torque = float(res.unmet_torque_nm)
             out.unmet_yaw_moment = float(res.unmet_yaw_moment_nm)
+            self._unmet = (out.unmet_torque / self.params.config.wheel_radius_m,
+                           out.unmet_yaw_moment)
             self.last_valid = torque
         except (ValueError, ArithmeticError) as exc:
             self.health.reject("inputs", stamp_ns, f"rejected inputs at {stamp_ns} ns ({exc}); "

@@ -1,5 +1,5 @@
-"""The friction-aware model's axle tyre: Magic Formula lateral force of one axle, its slopes,
-and its inverse for the peak (docs/mpc.md, "Friction-aware prediction").
+"""The friction-aware model's axle tyre: Magic Formula lateral force of one axle and its
+slopes (docs/mpc.md, "Friction-aware prediction").
 
 For an axle with cornering stiffness K (N/rad, both tyres) and peak force D = μ F_z ε (N)::
 
@@ -11,7 +11,8 @@ so F = K α at small α and |F| ≤ D. Its slopes:
     ∂F/∂D = g(z) − z g'(z),   g(z) = sin(C atan φ(z))       (B follows D)
 
 Beyond the peak ∂F/∂α < 0: a prediction linearised there sees that more slip gives less
-force (Falcone et al. 2007). :func:`peak_from_force` inverts F for D given a measured (α, F).
+force (Falcone et al. 2007). F grows with D at any α (∂F/∂D ≥ 0), so a measured force
+gives the road's μ by bisection (``grip``).
 """
 
 from __future__ import annotations
@@ -39,28 +40,3 @@ def force(alpha: float, k: float, d: float, c: float, e: float
     z = b * alpha
     g, dg = _g(z, c, e)
     return d * g, d * dg * b, g - z * dg
-
-
-def peak_from_force(alpha: float, f: float, k: float, c: float, e: float,
-                    min_deficit: float) -> float | None:
-    """The peak D for which F(α) = f, or None when (α, f) says nothing of the peak.
-
-    Evidence needs |f| below the linear K|α| by a clear margin, K|α| − |f| ≥ ``min_deficit``
-    (N), with f and α of one sign. Then g(z)/z = C |f|/(K|α|) is solved for z (g(z)/z falls
-    from C at z = 0) and D = K|α|/(C z). Past the peak's flat top the answer is |f|/g(z)."""
-    if alpha == 0.0 or f * alpha <= 0.0:
-        return None
-    ka = k * abs(alpha)
-    if ka - abs(f) < min_deficit:
-        return None
-    target = c * abs(f) / ka
-    lo, hi = 1e-9, 50.0
-    if _g(hi, c, e)[0] / hi > target:
-        return abs(f) / max(_g(hi, c, e)[0], 1e-9)
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if _g(mid, c, e)[0] / mid > target:
-            lo = mid
-        else:
-            hi = mid
-    return ka / (c * 0.5 * (lo + hi))

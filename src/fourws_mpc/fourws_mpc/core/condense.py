@@ -138,11 +138,11 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
 def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarray,
                 e_free: np.ndarray, th_hard: np.ndarray, hard_free: np.ndarray,
                 D: np.ndarray, en: np.ndarray, u_min_t: np.ndarray, u_max_t: np.ndarray,
-                u_prev: np.ndarray, band: np.ndarray, vy_max: float, r_max: float, state_bounds: bool,
-                from_step: int) -> None:
+                u_prev: np.ndarray, band: np.ndarray, vy_max: float, r_max: float,
+                state_bounds: bool, from_step: int, softness: float) -> None:
     """Stage 4: the step's rows of A and the bounds (lo, hi), in place, in the row order of
-    :class:`~fourws_mpc.core.qp.QpLayout` (Δũ box, ε ≥ 0, u bounds, hard v_y and r, soft
-    φ and Y above, soft below); A's Δũ box and ε rows are the layout's constants."""
+    :class:`~fourws_mpc.core.qp.QpLayout` (Δũ box, ε ≥ 0, u bounds, v_y and r above and
+    below (hard, or soft with ``softness`` > 0), soft φ and Y above, soft below); A's Δũ box and ε rows are the layout's constants."""
     n2, ncol = th_out.shape
     nu = u_prev.shape[0]
     n_c = ncol // nu
@@ -160,11 +160,13 @@ def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarra
                 A[o + k, m * nu + c] = D[m * nu + c] if m <= j else 0.0
             lo[o + k] = u_min_t[k] - u_prev[c]
             hi[o + k] = u_max_t[k] - u_prev[c]
-    o_h = 2 * ncol + 1
-    o_sh = o_h + n2
+    o_h = 2 * ncol + 1                             # v_y, r ≤ bound (+ c bound ε when soft)
+    o_hl = o_h + n2                                # v_y, r ≥ −bound (− c bound ε)
+    o_sh = o_hl + n2
     o_sl = o_sh + n2
     for i in range(n2):
         A[o_h + i, :ncol] = th_hard[i]
+        A[o_hl + i, :ncol] = th_hard[i]
         A[o_sh + i, :ncol] = th_out[i]
         A[o_sh + i, ncol] = -band[i]
         A[o_sl + i, :ncol] = th_out[i]
@@ -172,8 +174,13 @@ def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarra
         lim = inf
         if state_bounds and i >= 2 * (from_step - 1):
             lim = vy_max if i % 2 == 0 else r_max
-        lo[o_h + i] = -lim - hard_free[i]
+        relax = softness * lim if lim < inf else 0.0
+        A[o_h + i, ncol] = -relax
+        A[o_hl + i, ncol] = relax
+        lo[o_h + i] = -inf
         hi[o_h + i] = lim - hard_free[i]
+        lo[o_hl + i] = -lim - hard_free[i]
+        hi[o_hl + i] = inf
         lo[o_sh + i] = -inf
         hi[o_sh + i] = band[i] - e_free[i]
         lo[o_sl + i] = -band[i] - e_free[i]

@@ -160,8 +160,11 @@ class MpcConfig:
     mu_ceiling: float = param(1.2, "μ estimate is clamped to at most this (and flagged)",
                               lo=0.1, hi=3.0)
     mu_evidence_deficit: float = param(
-        0.1, "an axle's force below its linear force K|α| by this share of its load is "
-        "evidence of its peak (grip.py)", lo=0.01, hi=1.0)
+        0.1, "the car's lateral force m a_y below the linear tyres' K_f α_f + K_r α_r by this "
+        "share of its weight m g is evidence of the peak (grip.py)", lo=0.01, hi=1.0)
+    envelope_softness: float = param(
+        1e-3, "friction-aware: the β and r bounds are soft, the slack ε relaxing them by this "
+        "share of the bound (ε priced by rho like the tracking band)", lo=1e-4, hi=10.0)
     mu_fall_time_s: float = param(0.05, "time constant of a falling μ estimate", lo=1e-3,
                                   hi=10.0, unit="s")
     mu_rise_time_s: float = param(1.0, "time constant of a rising μ estimate, and of its "

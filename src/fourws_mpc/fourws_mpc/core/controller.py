@@ -190,6 +190,8 @@ class MpcResult:
     fallback: bool
     ref_index: int = 0
     ref_speed: float = 0.0
+    #: μ the step assumed (the friction-aware model's estimate; else the state's or
+    #: mu_default) and the |M_z| bound it applied (N·m)
     mu_estimate: float = math.nan
     yaw_moment_bound: float = math.nan
     grip_note: str = ""
@@ -302,6 +304,19 @@ class MpcController:
         self.sent = self.sent.resized(self._n_delay)
         self.sent.registers[0] = self.u_prev
 
+    def report_delivered(self, yaw_moment_nm: float) -> None:
+        """The yaw moment the lower layer delivered for the last command (its demand less
+        what it could not meet): the next step starts from it, u(k−1) and the newest command
+        sent, instead of from the one asked for. Non-finite: ``ValueError``, nothing
+        changes."""
+        mz = float(yaw_moment_nm)
+        if not math.isfinite(mz):
+            raise ValueError(f"delivered yaw moment: not finite ({yaw_moment_nm!r})")
+        lim = float(self._u_max[InputIdx.MZ]) if self._enabled[InputIdx.MZ] else 0.0
+        self.u_prev = self.u_prev.copy()
+        self.u_prev[InputIdx.MZ] = min(max(mz, -lim), lim)
+        self.sent.registers[0] = self.u_prev
+
     def adopt_reference(self, ref: Reference) -> None:
         """Use ``ref`` (the same path, e.g. with another search window) from the next step on
         and keep the nearest-point index, instead of a global search as for a new path."""
@@ -345,7 +360,7 @@ class MpcController:
         hz = self._horizons(err)
         pred = self._prediction(meas, ref, err, hz, mu)
         sol = self._solve(meas, mu, pred, hz, w)
-        return self._result(ref, err, w, hz, sol, pred)
+        return self._result(ref, err, w, hz, sol, pred, mu)
 
     # -- stages ---------------------------------------------------------------------------
     @staticmethod
@@ -423,9 +438,10 @@ class MpcController:
         hi[InputIdx.MZ] = mz_max
         lo[InputIdx.MZ] = -mz_max
         w_lo, w_hi = steer_window(s.vx, s.vy, s.yaw_rate, p, est.mu)
-        steer = [InputIdx.DF, InputIdx.DR]
-        lo[steer] = np.minimum(np.maximum(w_lo, lo[steer]), hi[steer])
-        hi[steer] = np.maximum(np.minimum(w_hi, hi[steer]), lo[steer])
+        for i, ch in enumerate((InputIdx.DF, InputIdx.DR)):
+            if self._enabled[ch]:            # a pinned input keeps its bounds around 0
+                lo[ch] = min(max(w_lo[i], lo[ch]), hi[ch])
+                hi[ch] = max(min(w_hi[i], hi[ch]), lo[ch])
         # reachable from u(k−1) within one increment: the QP stays feasible
         lo = np.minimum(lo, self.u_prev + self._du_max)
         hi = np.maximum(hi, self.u_prev - self._du_max)
@@ -440,13 +456,18 @@ class MpcController:
         beta_max, u_max = math.radians(c.max_sideslip_deg), self._u_max
         if pred.grip is not None:          # the envelope of the estimated grip
             mu_b, beta_max = pred.grip.estimate.mu, pred.grip.beta_max_rad
+        vy_max = vxb * math.tan(beta_max)
+        r_max = c.yaw_rate_mu_factor * mu_b * G / vxb
+        if pred.grip is None:
+            # hard bounds "no worse than now": where the QP starts, i.e. after a compensated
+            # delay (the friction-aware envelope is soft: its slack keeps the QP feasible)
+            vy_max = max(vy_max, abs(s.vy), abs(pred.zeta[StateIdx.VY]))
+            r_max = max(r_max, abs(s.yaw_rate), abs(pred.zeta[StateIdx.R]))
         bounds = QpBounds(
             du_max=self._du_max, u_max=u_max if pred.grip is None else pred.grip.u_max,
             u_min=None if pred.grip is None else pred.grip.u_min, enabled=self._enabled,
-            # "no worse than now": where the QP starts, i.e. after a compensated delay
-            vy_max=max(vxb * math.tan(beta_max), abs(s.vy), abs(pred.zeta[StateIdx.VY])),
-            r_max=max(c.yaw_rate_mu_factor * mu_b * G / vxb, abs(s.yaw_rate),
-                      abs(pred.zeta[StateIdx.R])),
+            vy_max=vy_max, r_max=r_max,
+            state_softness=0.0 if pred.grip is None else c.envelope_softness,
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
         q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
@@ -477,7 +498,7 @@ class MpcController:
         return sol
 
     def _result(self, ref: Reference, err: _Errors, w: _Weights, hz: _Horizons,
-                sol: QpSolution, pred: _Prediction) -> MpcResult:
+                sol: QpSolution, pred: _Prediction, mu: float | None) -> MpcResult:
         """Stage 7: u(k) (eq. 22) or the fallback; commit the step's history."""
         if sol.ok:
             u = sol.u[0].copy()
@@ -510,8 +531,9 @@ class MpcController:
             e_s=float(hz.e_s), k_e=float(hz.k_e), k_u=float(hz.k_u),
             solver_status=sol.status, iterations=sol.iterations, slack=float(sol.slack),
             fallback=fallback, ref_index=err.near.index, ref_speed=err.near.speed,
-            mu_estimate=math.nan if g is None else g.estimate.mu,
-            yaw_moment_bound=math.nan if g is None else g.mz_max_nm,
+            mu_estimate=(self.cfg.mu_default if mu is None else max(float(mu), 0.01))
+            if g is None else g.estimate.mu,
+            yaw_moment_bound=float(self._u_max[InputIdx.MZ]) if g is None else g.mz_max_nm,
             grip_note="" if g is None else g.estimate.note)
 
     # -- plan memory ----------------------------------------------------------------------

@@ -2,18 +2,18 @@
 (docs/mpc.md, "Friction-aware prediction").
 
 **Estimate.** When the state carries μ (the idealised world: the plant's truth) it is used.
-Otherwise μ̂ comes from what a car measures: the transient slips α̂' of the slip observer,
-a_y, and the yaw rate r. The axle forces follow from the lateral and yaw balances::
-
-    F_f = (b m a_y + I_z ṙ − M_z)/L,   F_r = (a m a_y − I_z ṙ + M_z)/L
-
-with ṙ the filtered difference of r and M_z the yaw moment last applied. An axle whose
-force is clearly below its linear force (K|α̂'| − |F| ≥ ``mu_evidence_deficit`` F_z, well
-above the force estimate's noise) has shown its peak: ``axle_tyre.peak_from_force`` gives D, and μ = D/(F_z ε). The lowest axle's μ is the
-evidence. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
-``mu_rise_time_s``, and without evidence (linear tyres say nothing of the peak) returns to
-the prior ``mu_default`` with ``mu_rise_time_s``. μ̂ is never below the grip in use,
-√(a_x² + a_y²)/g, and is clamped to [``mu_floor``, ``mu_ceiling``]; a clamp is flagged.
+Otherwise μ̂ comes from what a car measures: the transient slips α̂' of the slip observer and
+a_y. The car's lateral force is m a_y; the axles' Magic Formula forces at α̂' give it for a
+road μ by the sum F_f(α̂'f; μ F_z,f ε) + F_r(α̂'r; μ F_z,r ε), which grows with μ. When that
+sum in the linear tyres, K_f α̂'f + K_r α̂'r, exceeds |m a_y| by a clear margin
+(``mu_evidence_deficit`` m g, well above the noise of a_y and of the slips), the tyres have
+shown their peak and the μ that matches m a_y is the evidence (bisection). The sum needs no
+yaw acceleration, which a split between the axles would (a filtered ṙ lags a lane change
+and made the split wrong by half). μ̂ follows falling evidence with ``mu_fall_time_s``,
+rising evidence with ``mu_rise_time_s``, and without evidence (linear tyres say nothing of
+the peak) returns to the prior ``mu_default`` with ``mu_rise_time_s``. μ̂ is never below the
+grip in use, √(a_x² + a_y²)/g, and is clamped to [``mu_floor``, ``mu_ceiling``]; a clamp is
+flagged.
 
 **Envelope** (Beal and Gerdes 2013), from μ̂:
 
@@ -33,13 +33,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fourws_mpc.core.axle_tyre import force, peak_from_force
+from fourws_mpc.core.axle_tyre import force
 from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse
-from fourws_mpc.core.model import ModelParams, StateIdx
+from fourws_mpc.core.model import ModelParams
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
-#: filter time constant of the yaw acceleration ṙ (s)
-RDOT_FILTER_S = 0.05
+#: the μ range the evidence is searched in
+MU_SEARCH = (0.02, 3.0)
 #: flag values of :attr:`GripEstimate.note`
 CLAMPED_LOW = "mu estimate clamped to mu_floor"
 CLAMPED_HIGH = "mu estimate clamped to mu_ceiling"
@@ -59,11 +59,9 @@ class GripSettings:
 
 @dataclass(frozen=True, slots=True)
 class GripMemory:
-    """What the estimator carries to the next step: μ̂, r and the filtered ṙ."""
+    """What the estimator carries to the next step: μ̂."""
 
     mu: float
-    yaw_rate: float
-    yaw_accel: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +75,16 @@ class GripEstimate:
 
 def _pole(dt_s: float, tau_s: float) -> float:
     return 1.0 - math.exp(-dt_s / tau_s)
+
+
+def _axle_sum(zeta: np.ndarray, p: ModelParams, mu: float, eps: float) -> float:
+    """F_f + F_r (N) of the axles' Magic Formula at α̂' on a road of μ."""
+    total = 0.0
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+        total += force(float(alpha), 2.0 * c, mu * fz * eps, p.tyre_shape_lateral,
+                       p.tyre_curvature_lateral)[0]
+    return total
 
 
 class GripEstimator:
@@ -93,49 +101,45 @@ class GripEstimator:
             return self.s.ceiling, CLAMPED_HIGH
         return mu, ""
 
-    def evidence(self, zeta: np.ndarray, ay: float, yaw_accel: float, mz: float,
-                 mu_now: float, ax: float) -> float | None:
-        """The lowest μ an axle shows (module docstring), or None."""
+    def evidence(self, zeta: np.ndarray, ax: float, ay: float, mz: float, mu_now: float
+                 ) -> float | None:
+        """The μ for which the axles' forces at α̂' sum to m a_y, when the linear tyres
+        exceed it by the margin (module docstring); else None."""
         p = self.p
-        length = p.a_m + p.b_m
-        iz_rdot = p.yaw_inertia_kg_m2 * yaw_accel
-        f_axle = ((p.b_m * p.mass_kg * ay + iz_rdot - mz) / length,
-                  (p.a_m * p.mass_kg * ay - iz_rdot + mz) / length)
+        f = p.mass_kg * ay
+        linear = 2.0 * (p.c_cf * zeta[RelaxIdx.ALPHA_F] + p.c_cr * zeta[RelaxIdx.ALPHA_R])
+        if f * linear <= 0.0 or abs(linear) - abs(f) < (self.s.evidence_deficit * p.mass_kg
+                                                         * p.gravity_mps2):
+            return None
         eps, _ = ellipse(mz, p, Grip(mu_now, ax))
-        best = None
-        for alpha, f, c, fz in zip((zeta[RelaxIdx.ALPHA_F], zeta[RelaxIdx.ALPHA_R]), f_axle,
-                                   (p.c_cf, p.c_cr), axle_loads(p), strict=True):
-            d = peak_from_force(float(alpha), f, 2.0 * c, p.tyre_shape_lateral,
-                                p.tyre_curvature_lateral, self.s.evidence_deficit * fz)
-            if d is not None:
-                mu = d / (fz * max(eps, 1e-3))
-                best = mu if best is None else min(best, mu)
-        return best
+        lo, hi = MU_SEARCH
+        if abs(_axle_sum(zeta, p, hi, eps)) < abs(f):
+            return None                       # no road explains it: not evidence
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if abs(_axle_sum(zeta, p, mid, eps)) < abs(f):
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi)
 
     def estimate(self, zeta: np.ndarray, ax: float, ay: float, mz: float,
                  mu_state: float | None, memory: GripMemory | None, dt_s: float
                  ) -> tuple[GripEstimate, GripMemory]:
         """μ̂ at the measured ζ_t (with the observer's α̂'), the measured a_x, a_y (m/s²),
         the yaw moment last applied (N·m) and the state's μ (None: not measured)."""
-        r = float(zeta[StateIdx.R])
-        if memory is None or dt_s <= 0.0:
-            rdot = 0.0 if memory is None else memory.yaw_accel
-            mu_prev = self.s.prior if memory is None else memory.mu
-        else:
-            raw = (r - memory.yaw_rate) / dt_s
-            rdot = memory.yaw_accel + _pole(dt_s, RDOT_FILTER_S) * (raw - memory.yaw_accel)
-            mu_prev = memory.mu
         if mu_state is not None:
             mu, note = self._clamp(float(mu_state))
-            return GripEstimate(mu, "state", note), GripMemory(mu, r, rdot)
-        ev = self.evidence(zeta, ay, rdot, mz, mu_prev, ax)
+            return GripEstimate(mu, "state", note), GripMemory(mu)
+        mu_prev = self.s.prior if memory is None else memory.mu
+        ev = self.evidence(zeta, ax, ay, mz, mu_prev)
         target = self.s.prior if ev is None else ev
         tau = self.s.fall_time_s if target < mu_prev else self.s.rise_time_s
         mu = mu_prev + (_pole(dt_s, tau) if dt_s > 0.0 else 0.0) * (target - mu_prev)
         used = math.hypot(ax, ay) / self.p.gravity_mps2
         mu, note = self._clamp(max(mu, used) if math.isfinite(used) else mu)
         return (GripEstimate(mu, "prior" if ev is None else "evidence", note),
-                GripMemory(mu, r, rdot))
+                GripMemory(mu))
 
 
 def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:

@@ -216,6 +216,9 @@ class QpBounds:
     state_bounds: bool = True
     state_bounds_from_step: int = 1   # first prediction step i (1-based) with the hard bounds
     u_min: np.ndarray | None = None   # (3,) lower bound on u; None: −u_max
+    #: 0: the v_y and r bounds are hard; c > 0: soft, the slack ε relaxes them by c·bound
+    #: (one ε for all soft rows, weight ρ)
+    state_softness: float = 0.0
 
     def lower(self) -> np.ndarray:
         """The lower bound on u (3,): ``u_min``, or −``u_max``."""
@@ -297,9 +300,10 @@ class QpLayout:
         top = np.hstack([eye, z((ncol, 1), bool)])
         eps_row = np.hstack([z((1, ncol), bool), np.ones((1, 1), bool)])
         ub = np.hstack([cum, z((ncol, 1), bool)])
-        hard = np.hstack([th2, z((2 * n_p, 1), bool)])
+        # the v_y and r bounds: an upper and a lower row each, with the slack column (its
+        # coefficient is 0 while the bounds are hard)
         soft = np.hstack([th2, np.ones((2 * n_p, 1), bool)])
-        return np.vstack([top, eps_row, ub, hard, soft, soft])
+        return np.vstack([top, eps_row, ub, soft, soft, soft, soft])
 
 
 def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -367,8 +371,9 @@ class MpcQp:
         qvec = np.concatenate([g, [0.0]])
         A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
         constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_min_t, u_max_t,
-                    u_prev, band, float(bounds.vy_max), float(bounds.r_max), bool(bounds.state_bounds),
-                    int(bounds.state_bounds_from_step))
+                    u_prev, band, float(bounds.vy_max), float(bounds.r_max),
+                    bool(bounds.state_bounds), int(bounds.state_bounds_from_step),
+                    float(bounds.state_softness))
 
         warm = None
         if warm_du_scaled is not None:

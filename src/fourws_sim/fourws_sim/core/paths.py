@@ -40,12 +40,23 @@ the left; ``s`` the arc length from the first sample.
 
 5. ``straight``: Y = 0.
 
+6. ``iso3888_2``: a smooth centre line through the ISO 3888-2 obstacle-avoidance course
+   (../shared/limit-handling-notes.md): 1 entry lane 12 m, 1.1w + 0.25; 2 gap 13.5 m;
+   3 side lane 11 m, w + 1, its near edge 1 m beyond the entry lane's left edge; 4 gap
+   12.5 m; 5 exit lane 12 m, max(1.3w + 0.25, 3), its right edge on the entry lane's right
+   edge. One tanh step per gap, centred in it, each as gentle as the cones allow the body
+   (:func:`cone_steepness`).
+
+``iso3888`` and ``iso3888_2`` carry their cone lanes (``ReferencePath.lanes``), which the
+limit bench checks the car's body against.
+
 ``speed`` is the scenario speed, or a piecewise-linear profile in X
 (``speed_profile_kmh: [[x_m, v_kmh], ...]``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 from collections.abc import Mapping, Sequence
@@ -79,6 +90,8 @@ class ReferencePath:
     curvature: np.ndarray  # 1/m
     s: np.ndarray  # m
     speed: np.ndarray  # m/s
+    #: the cone lanes of a test course, (x_from, x_to, y_centre, width) in m; empty if none
+    lanes: tuple = ()
 
     def __post_init__(self) -> None:
         n = len(self.x)
@@ -186,6 +199,76 @@ def iso3888_lanes(vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5) -> l
     ]
 
 
+ISO3888_2_SECTIONS_M = (12.0, 13.5, 11.0, 12.5, 12.0)
+
+
+def iso3888_2_lanes(vehicle_width_m: float = 1.5) -> list[tuple]:
+    """[(x_from, x_to, y_centre, width)] of the three cone lanes of ISO 3888-2, m."""
+    w = vehicle_width_m
+    starts = np.concatenate(([0.0], np.cumsum(ISO3888_2_SECTIONS_M)))
+    entry, side, exit_ = 1.1 * w + 0.25, w + 1.0, max(1.3 * w + 0.25, 3.0)
+    side_y = entry / 2.0 + 1.0 + side / 2.0
+    exit_y = -entry / 2.0 + exit_ / 2.0
+    return [(starts[0], starts[1], 0.0, entry), (starts[2], starts[3], side_y, side),
+            (starts[4], starts[5], exit_y, exit_)]
+
+
+def _steps_y(x: float, y0: float, steps: Sequence[tuple[float, float, float]]) -> float:
+    return y0 + sum(h / 2.0 * (1.0 + math.tanh(k * (x - xc))) for xc, h, k in steps)
+
+
+def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float
+                   ) -> list[tuple[float, float, float]]:
+    """[(X_c, height, k)] of the tanh steps between consecutive lanes: centred in each gap,
+    each k the smallest that keeps the body within the cones at the two lane ends next to
+    its step, the other steps' tails included (a few fixed-point rounds)."""
+    w = vehicle_width_m
+    free = [(ln[3] - w) / 2.0 for ln in lanes]
+    if min(free) <= 0.0:
+        raise ValueError(f"path.vehicle_width_m: {w} m does not fit the course's lanes")
+    steps = [[0.5 * (a[1] + b[0]), b[2] - a[2], 1.0] for a, b in zip(lanes, lanes[1:])]
+    y0 = lanes[0][2]
+    checks = [[(a[1], a[2], fa), (b[0], b[2], fb)]
+              for a, b, fa, fb in zip(lanes, lanes[1:], free, free[1:])]
+    for _ in range(6):
+        for i in range(len(steps)):
+            lo, hi = 1e-3, 5.0
+            for _ in range(80):
+                steps[i][2] = mid = 0.5 * (lo + hi)
+                ok = all(abs(_steps_y(x, y0, steps) - yc) <= m for x, yc, m in checks[i])
+                lo, hi = (lo, mid) if ok else (mid, hi)
+            steps[i][2] = hi
+    return [tuple(st) for st in steps]
+
+
+def iso3888_2(
+    speed_mps: float,
+    vehicle_width_m: float = 1.5,
+    x_start_m: float = DEFAULT_X_START_M,
+    x_end_m: float | None = None,
+    spacing_m: float = DEFAULT_SPACING_M,
+    speed_profile_kmh: Sequence | None = None,
+) -> ReferencePath:
+    """Smooth centre line of the ISO 3888-2 course (section 1 starts at X = 0)."""
+    lanes = iso3888_2_lanes(vehicle_width_m)
+    steps = cone_steepness(lanes, vehicle_width_m)
+    if x_end_m is None:
+        x_end_m = sum(ISO3888_2_SECTIONS_M) + LEAD_OUT_M
+    x = _x_grid(x_start_m, x_end_m, spacing_m)
+    y = np.full_like(x, lanes[0][2])
+    yp = np.zeros_like(x)
+    ypp = np.zeros_like(x)
+    for xc, h, k in steps:
+        t = np.tanh(k * (x - xc))
+        sech2 = 1.0 - t * t
+        y += h / 2.0 * (1.0 + t)
+        yp += h / 2.0 * k * sech2
+        ypp += -h * k * k * t * sech2
+    path = _graph_path("iso3888_2", x, y, yp, ypp,
+                       _speed_array(x, speed_mps, speed_profile_kmh))
+    return dataclasses.replace(path, lanes=tuple(lanes))
+
+
 def _smoothstep(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     u = np.clip(u, 0.0, 1.0)
     return (
@@ -284,7 +367,9 @@ def iso3888(
     y = h2 * (t1 - t2)
     yp = h2 * (k1 * s1 - k2 * s2)
     ypp = h2 * (-2.0 * k1 * k1 * t1 * s1 + 2.0 * k2 * k2 * t2 * s2)
-    return _graph_path("iso3888", x, y, yp, ypp, _speed_array(x, speed_mps, speed_profile_kmh))
+    path = _graph_path("iso3888", x, y, yp, ypp, _speed_array(x, speed_mps, speed_profile_kmh))
+    return dataclasses.replace(path, lanes=tuple(iso3888_lanes(vehicle_width_m,
+                                                                 lane_offset_m)))
 
 
 def sine(
@@ -366,8 +451,8 @@ def circle(
 
 # --- scenario glue ----------------------------------------------------------------------
 
-_BUILDERS = {"tanh_dlc": tanh_dlc, "iso3888": iso3888, "circle": circle, "sine": sine,
-             "straight": straight}
+_BUILDERS = {"tanh_dlc": tanh_dlc, "iso3888": iso3888, "iso3888_2": iso3888_2,
+             "circle": circle, "sine": sine, "straight": straight}
 
 
 def path_from_mapping(

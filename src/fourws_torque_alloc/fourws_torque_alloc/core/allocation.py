@@ -64,6 +64,12 @@ which are equivalent to prescribing the two side sums
 
 ``equal`` — T/4 per wheel (controllers without DYC), clipped to the motor limits.
 
+``production`` — what a car already does (the fair baseline, beyond the paper)
+    Each side sum is split between the axles by a fixed share: when it drives (S ≥ 0) by
+    static axle load, front share b/L; when it brakes (S < 0) by a production brake balance,
+    front share ``brake_balance_front`` (cars put about 60-70 % of the brake force on the
+    front axle). Clipped to the motor limits.
+
 Wheels in the air: a wheel with F_z ≤ min_fz_n (or μ_i F_zi below 1e-3 N) can transmit no
 force: it gets zero weight in ``optimal`` (its side partner takes the whole side sum) and a
 zero bound in ``optimal_bounded``; with both wheels of a side in the air that side's sum is
@@ -92,7 +98,7 @@ from fourws_common.wheels import Wheel
 from fourws_torque_alloc.core.bounded_qp import BoundedQp
 from fourws_torque_alloc.core.bounded_qp import clip_scalar as _clip
 
-METHODS = ("optimal", "optimal_bounded", "rule", "equal")
+METHODS = ("optimal", "optimal_bounded", "rule", "equal", "production")
 PRIORITIES = ("yaw_moment", "total_torque")
 BOUNDED_SOLVERS = ("osqp", "analytic")
 #: where the per-wheel F_z, F_y and μ come from (``tyre_estimate.TyreData``)
@@ -126,6 +132,8 @@ class AllocatorConfig:
                                 choices=BOUNDED_SOLVERS)
     demand_sanity_factor: float = param(10.0, "demands above this multiple of the motors' "
                                         "capacity are rejected as absurd", lo=1.0, hi=1.0e3)
+    brake_balance_front: float = param(0.65, "production: front axle's share of a braking "
+                                       "side sum", lo=0.0, hi=1.0)
     tyre_forces: str = param("oracle", "per-wheel F_z, F_y, mu from the state message (oracle: "
                              "the plant's truth, the paper's idealised setting) or estimated "
                              "from the measured a_x, a_y (tyre_estimate)", choices=TYRE_SOURCES)
@@ -299,6 +307,21 @@ def rule(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: np.n
     return _finish(_clip_motor(raw, cfg), inp, cfg)
 
 
+def production(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,
+               mu: np.ndarray, cfg: AllocatorConfig) -> AllocationResult:
+    """The fair baseline: each side sum split front/rear by static axle load when it drives
+    and by the brake balance when it brakes (module docstring), clipped to the motor limits.
+    Arguments as :func:`optimal` (loads are checked but not used)."""
+    inp = _prepare(t_nm, mz_nm, fz_n, fy_n, mu, cfg)
+    drive_front = cfg.cg_to_rear_axle_m / (cfg.cg_to_front_axle_m + cfg.cg_to_rear_axle_m)
+    out = [0.0] * 4
+    for front, rear, s in zip((_FL, _FR), (_RL, _RR), _side_demands(inp.t, inp.mz, cfg),
+                              strict=True):
+        share = drive_front if s >= 0.0 else cfg.brake_balance_front
+        out[front], out[rear] = share * s, (1.0 - share) * s
+    return _finish(_clip_motor(out, cfg), inp, cfg)
+
+
 def equal(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray, mu: np.ndarray,
           cfg: AllocatorConfig) -> AllocationResult:
     """T/4 per wheel, clipped to the motor limits; M_z is not served (reported unmet)."""
@@ -402,7 +425,7 @@ def optimal_bounded(t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarra
     return _finish(torques, inp, cfg, flags)
 
 
-_METHODS = {"optimal": optimal, "rule": rule, "equal": equal}
+_METHODS = {"optimal": optimal, "rule": rule, "equal": equal, "production": production}
 
 
 def allocate(method: str, t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,

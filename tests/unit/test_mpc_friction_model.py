@@ -1,0 +1,259 @@
+"""The friction-aware prediction (``axle_tyre``, ``friction_model``, ``grip``): the axle tyre
+against the plant's Magic Formula, exact Jacobians, the linear limit, the friction ellipse,
+the μ estimate, and the controller's grip envelope."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fourws_mpc.core import friction_model as FM
+from fourws_mpc.core import relaxation_model as RM
+from fourws_mpc.core.axle_tyre import force
+from fourws_mpc.core.config import MpcConfig
+from fourws_mpc.core.controller import MpcController, VehicleSample
+from fourws_mpc.core.grip import (
+    CLAMPED_HIGH,
+    CLAMPED_LOW,
+    GripEstimator,
+    GripSettings,
+    peak_slips,
+    steer_window,
+    yaw_moment_bound,
+)
+from fourws_mpc.core.model import InputIdx, ModelParams, StateIdx
+from fourws_mpc.core.reference import Reference
+from fourws_sim.core.tyre import peak_argument
+from fourws_sim.core.vehicle_params import load_vehicle_params
+
+P = ModelParams()
+V = 60 / 3.6
+R_ = RM.RelaxIdx
+C, E = P.tyre_shape_lateral, P.tyre_curvature_lateral
+
+
+def _mf(alpha, k, d):
+    """The plant's pure-slip Magic Formula (tyre.py's equation), independently written."""
+    b = k / (C * d)
+    z = b * alpha
+    return d * math.sin(C * math.atan(z - E * (z - math.atan(z))))
+
+
+@pytest.mark.parametrize("alpha", [-0.3, -0.05, -0.01, 0.0, 0.002, 0.04, 0.08, 0.5])
+def test_the_axle_tyre_is_the_magic_formula_and_its_slopes_are_exact(alpha):
+    k, d = 56000.0, 1900.0
+    f, df_da, df_dd = force(alpha, k, d, C, E)
+    assert f == pytest.approx(_mf(alpha, k, d), rel=1e-12, abs=1e-9)
+    h = 1e-7
+    assert df_da == pytest.approx((_mf(alpha + h, k, d) - _mf(alpha - h, k, d)) / (2 * h),
+                                  rel=1e-5, abs=1e-3)
+    assert df_dd == pytest.approx((_mf(alpha, k, d + 1e-3) - _mf(alpha, k, d - 1e-3)) / 2e-3,
+                                  rel=1e-5, abs=1e-6)
+
+
+def test_small_slip_gives_the_linear_force_and_the_peak_is_mu_fz():
+    k, d = 56000.0, 1900.0
+    assert force(1e-5, k, d, C, E)[1] == pytest.approx(k, rel=1e-6)
+    alphas = np.linspace(0.0, 0.5, 5001)
+    peak = max(force(a, k, d, C, E)[0] for a in alphas)
+    assert peak == pytest.approx(d, rel=1e-6)
+    # beyond the peak the slope is negative: more slip, less force
+    a_peak = peak_argument(C, E) * C * d / k
+    assert force(1.5 * a_peak, k, d, C, E)[1] < 0.0
+
+
+def _point(rng, vx=V):
+    z = np.array([rng.uniform(-0.5, 0.5), vx, rng.uniform(-0.2, 0.2), rng.uniform(-0.3, 0.3),
+                  rng.uniform(-1, 1), rng.uniform(0, 50), rng.uniform(-0.1, 0.1),
+                  rng.uniform(-0.05, 0.05), rng.uniform(-0.12, 0.12),
+                  rng.uniform(-0.12, 0.12)])
+    return z, np.array([rng.uniform(-0.1, 0.1), rng.uniform(-0.05, 0.05),
+                        rng.uniform(-1500, 1500)])
+
+
+@pytest.mark.parametrize("mu,ax", [(0.5, 0.0), (0.9, 1.5), (0.3, -2.0)])
+def test_jacobians_equal_central_finite_differences(mu, ax):
+    rng = np.random.default_rng(11)
+    g = FM.Grip(mu, ax)
+    for _ in range(6):
+        z, u = _point(rng)
+        f, A, B = FM.jacobians(z, u, P, g)
+        np.testing.assert_allclose(f, FM.dynamics(z, u, P, g), rtol=1e-12)
+        for j in range(FM.N_STATE_FRICTION):
+            h = 1e-6 * max(1.0, abs(z[j]))
+            dz = np.zeros_like(z)
+            dz[j] = h
+            fd = (FM.dynamics(z + dz, u, P, g) - FM.dynamics(z - dz, u, P, g)) / (2 * h)
+            np.testing.assert_allclose(A[:, j], fd, rtol=1e-5, atol=1e-5, err_msg=f"col {j}")
+        for j in range(3):
+            h = 1e-6 * max(1.0, abs(u[j]))
+            du = np.zeros(3)
+            du[j] = h
+            fd = (FM.dynamics(z, u + du, P, g) - FM.dynamics(z, u - du, P, g)) / (2 * h)
+            np.testing.assert_allclose(B[:, j], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_on_a_straight_without_yaw_moment_it_is_the_relaxation_model():
+    """α' = 0, M_z = 0: slope K, ε = 1, ∂ε/∂M_z = 0, so the linearisation (and with it the
+    margins of ``fourws margins``) equals the paper-tyre model's."""
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    u = np.zeros(3)
+    f1, A1, B1 = FM.jacobians(z, u, P, FM.Grip(0.5, 0.0))
+    f0, A0, B0 = RM.jacobians(z, u, P)
+    np.testing.assert_allclose(A1, A0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(B1, B0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(f1, f0, atol=1e-12)
+
+
+def test_a_yaw_moment_costs_lateral_grip_by_the_friction_ellipse():
+    """ε(M_z) = ½[√(1 − η_L²) + √(1 − η_R²)], η = ±2 M_z/(B μ m g): a saturated axle loses
+    exactly that share of its force."""
+    g = FM.Grip(0.5, 0.0)
+    mz = 1000.0
+    eta = 2 * mz / (P.track_width_m * 0.5 * P.mass_kg * P.gravity_mps2)
+    eps, deps = FM.ellipse(mz, P, g)
+    assert eps == pytest.approx(math.sqrt(1 - eta ** 2), rel=1e-12)
+    assert deps < 0.0
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    z[R_.ALPHA_F] = z[R_.ALPHA_R] = 1e4       # the sliding limit: F = D sin(Cπ/2) ∝ D
+    (f0, _, _), (r0, _, _), _ = FM.axle_forces(z, 0.0, P, g)
+    (f1, _, _), (r1, _, _), _ = FM.axle_forces(z, mz, P, g)
+    assert f1 / f0 == pytest.approx(eps, rel=1e-6)
+    assert r1 / r0 == pytest.approx(eps, rel=1e-6)
+
+
+def _estimator(**kw):
+    return GripEstimator(P, GripSettings(**kw))
+
+
+def _cornering_state(mu, share, sign=1.0):
+    """ζ_t and a_y of cornering with both axles at ``share`` of their peak slip on a road of
+    μ (a_y from the two axles' Magic Formula forces)."""
+    fz_f, fz_r = FM.axle_loads(P)
+    a_f, a_r = (share * a for a in peak_slips(P, mu))
+    force_sum = _mf(a_f, 2 * P.c_cf, mu * fz_f) + _mf(a_r, 2 * P.c_cr, mu * fz_r)
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    z[R_.ALPHA_F], z[R_.ALPHA_R] = sign * a_f, sign * a_r
+    return z, sign * force_sum / P.mass_kg
+
+
+def test_mu_comes_from_the_state_when_it_carries_one():
+    est, mem = _estimator().estimate(np.zeros(10), 0.0, 0.0, 0.0, 0.55, None, 0.01)
+    assert (est.mu, est.source, est.note) == (0.55, "state", "")
+
+
+@pytest.mark.parametrize("mu,sign", [(0.3, 1.0), (0.5, -1.0), (0.9, 1.0)])
+def test_saturating_tyres_pull_the_estimate_to_the_road(mu, sign):
+    e = _estimator(prior=1.0)
+    z, ay = _cornering_state(mu, 0.9, sign)
+    mem = None
+    for _ in range(100):                                  # 1 s
+        est, mem = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
+    assert est.source == "evidence"
+    assert est.mu == pytest.approx(mu, rel=1e-3)
+
+
+def test_tyres_at_half_their_peak_say_nothing_and_noise_makes_no_evidence():
+    """At 30 % of the peak slip the force is within the margin of the linear one; and a
+    lateral acceleration of the wrong sign (noise on a straight) is never evidence."""
+    e = _estimator(prior=1.0)
+    z, ay = _cornering_state(0.9, 0.3)
+    assert e.evidence(z, 0.0, ay, 0.0, 1.0) is None
+    assert e.evidence(z, 0.0, -ay, 0.0, 1.0) is None
+
+
+def test_without_evidence_it_returns_to_the_prior_and_never_below_the_grip_in_use():
+    e = _estimator(prior=1.0, rise_time_s=1.0)
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    z[R_.ALPHA_F] = 0.002                                 # linear range: says nothing
+    ay = 2 * P.c_cf * 0.002 * (P.a_m + P.b_m) / (P.b_m * P.mass_kg)
+    from fourws_mpc.core.grip import GripMemory
+    mem = GripMemory(0.4)
+    for _ in range(300):                                  # 3 time constants
+        est, mem = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
+    assert est.source == "prior"
+    assert est.mu == pytest.approx(1.0 - 0.6 * math.exp(-3.0), rel=1e-3)
+    est, _ = e.estimate(z, 6.0, 6.0, 0.0, None, GripMemory(0.3), 0.01)
+    assert est.mu >= math.hypot(6.0, 6.0) / 9.81
+
+
+@pytest.mark.parametrize("mu,note", [(0.0, CLAMPED_LOW), (-3.0, CLAMPED_LOW),
+                                     (math.nan, CLAMPED_LOW), (50.0, CLAMPED_HIGH)])
+def test_an_absurd_mu_is_clamped_and_flagged(mu, note):
+    est, _ = _estimator(floor=0.1, ceiling=1.2).estimate(np.zeros(10), 0.0, 0.0, 0.0, mu,
+                                                          None, 0.01)
+    assert est.note == note
+    assert est.mu == (0.1 if note == CLAMPED_LOW else 1.2)
+
+
+def test_the_yaw_moment_bound_is_the_spare_longitudinal_grip():
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    full = 0.5 * P.track_width_m * 0.5 * P.mass_kg * P.gravity_mps2
+    assert yaw_moment_bound(z, P, 0.5, 0.0) == pytest.approx(full, rel=1e-9)
+    z[R_.ALPHA_F] = peak_slips(P, 0.5)[0]                  # front axle at its peak
+    assert yaw_moment_bound(z, P, 0.5, 0.0) == pytest.approx(0.0, abs=1e-6)
+    z[R_.ALPHA_F] = 0.0
+    assert yaw_moment_bound(z, P, 0.5, 0.5 * 9.81) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_steer_window_is_the_peak_slip_around_the_kinematic_angle():
+    vy, r = 0.3, 0.2
+    lo, hi = steer_window(V, vy, r, P, 0.5)
+    kin = np.array([(vy + P.a_m * r) / V, (vy - P.b_m * r) / V])
+    np.testing.assert_allclose(0.5 * (lo + hi), kin, rtol=1e-12)
+    np.testing.assert_allclose(0.5 * (hi - lo), peak_slips(P, 0.5), rtol=1e-12)
+
+
+def test_peak_slips_are_the_plants_at_static_load():
+    """The axle's peak slip u* C D/K equals the plant tyre's at static load (its own
+    stiffness), within the load sensitivity of the plant's K_α (0.5 %)."""
+    v = load_vehicle_params()
+    fz = v.static_wheel_loads_n
+    c_f, c_r = v.static_cornering_stiffness()
+    u = peak_argument(C, E)
+    plant = (u * C * 0.5 * fz[0] / c_f, u * C * 0.5 * fz[2] / c_r)
+    np.testing.assert_allclose(peak_slips(P, 0.5), plant, rtol=5e-3)
+
+
+def _ref():
+    x = np.arange(-20.0, 400.0, 0.05)
+    return Reference.from_arrays(x, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
+                                 np.full_like(x, V))
+
+
+def test_the_controller_keeps_its_commands_inside_the_grip_envelope():
+    """Far off the path on μ 0.3 with the front axle already past its peak: the front steer
+    stays in the window around its kinematic angle (one increment of reach), and the yaw
+    moment within the spare grip."""
+    cfg = MpcConfig(prediction_model="single_track_friction", terminal_cost="lqr")
+    ctrl = MpcController(cfg)
+    ref = _ref()
+    vy, r = -0.4, 0.25
+    s = VehicleSample(0.0, -1.5, 0.0, V, vy, r, steer_front=0.1, ax=0.0, ay=2.5)
+    res = None
+    for k in range(30):
+        res = ctrl.step(k * 0.01, VehicleSample(V * 0.01 * k, s.y, s.yaw, V, vy, r,
+                                                steer_front=res.delta_front if res else 0.0,
+                                                ay=2.5), ref, mu=0.3)
+        kin = (vy + P.a_m * r) / V
+        a_pf = peak_slips(ctrl.model.params, 0.3)[0]
+        reach = math.radians(cfg.max_dsteer_front_deg)
+        assert abs(res.delta_front - kin) <= a_pf + reach + 1e-9
+        assert abs(res.yaw_moment) <= res.yaw_moment_bound + cfg.max_dyaw_moment_nm + 1e-9
+        assert math.isfinite(res.mu_estimate) and res.mu_estimate == pytest.approx(0.3)
+    assert not res.fallback
+
+
+def test_the_paper_models_report_the_mu_and_bound_they_used():
+    cfg = MpcConfig()
+    ctrl = MpcController(cfg)
+    res = ctrl.step(0.0, VehicleSample(0.0, 0.1, 0.0, V, 0.0, 0.0), _ref(), mu=0.3)
+    assert (res.mu_estimate, res.yaw_moment_bound) == (0.3, cfg.max_yaw_moment_nm)
+    res = ctrl.step(0.01, VehicleSample(0.17, 0.1, 0.0, V, 0.0, 0.0), _ref())
+    assert res.mu_estimate == cfg.mu_default
+    assert ctrl._grip is None and cfg.u_max[InputIdx.MZ] == cfg.max_yaw_moment_nm
