@@ -5,7 +5,7 @@ ENV := source ros_ws/env.sh
 PYTEST_ARGS ?=
 OUT ?= runs/paper
 
-.PHONY: setup run test lint bench tune-check clean
+.PHONY: setup run test lint bench tune-check limits clean
 
 setup:
 	@bash tools/setup.sh
@@ -27,6 +27,10 @@ bench: setup
 # the tuning procedure rerun for every group (CI reruns one group): the presets must be its choice
 tune-check: setup
 	@$(ENV) && fourws tune benchmarks/tuning.yaml --workers 2 --check
+
+# the limit-handling bench (benchmarks/limits.yaml): runs it and writes docs/limits.md
+limits: setup
+	@$(ENV) && python tools/make_limits.py --workers 2
 
 clean:
 	rm -rf ros_ws/build ros_ws/install ros_ws/log

@@ -239,3 +239,21 @@ def test_a_run_uses_one_blas_thread_whatever_the_process(swept, monkeypatch):
     assert seen and seen[0] and set(seen[0]) == {1}, seen
     assert "stop here" in row["reason"] and row["completed"] is False
     assert after and max(after) <= 2
+
+
+def test_the_limit_bench_spec_loads_every_scenario_and_covers_the_issue():
+    """benchmarks/limits.yaml: both worlds, both tyre models, five seeds under realistic,
+    every scenario loads, and the allocation methods include the fair baseline."""
+    from pathlib import Path
+
+    from fourws_sim.core.scenario import load_scenario
+
+    spec = Path(__file__).resolve().parents[2] / "benchmarks" / "limits.yaml"
+    jobs = load_spec(spec)
+    conds = {j.condition.name for j in jobs}
+    assert {"ideal_linear", "ideal_friction", "realistic_linear",
+            "realistic_friction", "realistic_production"} <= conds
+    assert {j.condition.seed for j in jobs if j.condition.name == "realistic_friction"} == \
+        set(range(5))
+    for name in {j.scenario for j in jobs}:
+        load_scenario(name)

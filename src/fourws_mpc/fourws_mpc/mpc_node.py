@@ -3,8 +3,8 @@
 Subscribes ``/vehicle/state`` (newest only, :data:`~fourws_common.qos.LATEST_QOS`),
 ``/reference/trajectory`` and ``/control/wheel_torques`` (the allocator's unmet yaw moment for
 the command it answered: the next step starts from the yaw moment delivered,
-``MpcController.report_delivered``); publishes ``/control/mpc_command`` and ``/control/mpc_diagnostics``
-for every new state, stamped like it. All control logic lives in
+``MpcController.report_delivered``); publishes ``/control/mpc_command`` and
+``/control/mpc_diagnostics`` for every new state, stamped like it. All control logic lives in
 ``fourws_mpc.core.controller``; this node converts messages, measures the wall time of each
 controller step for the diagnostics, and guards its input:
 

@@ -38,6 +38,8 @@ class Condition:
     tyre_forces: str = "oracle"
     mu_nominal: float = 0.8
     mpc_overrides: Mapping[str, Any] = field(default_factory=dict)
+    #: allocator parameter overrides (a study of the allocation methods)
+    allocator_overrides: Mapping[str, Any] = field(default_factory=dict)
     vehicle_overrides: Mapping[str, Any] = field(default_factory=dict)
     seed: int = 0
     #: tell the MPC the delay and dead time (its ``input_delay_periods``,
@@ -70,13 +72,15 @@ class Condition:
         return (not any(s.sigma > 0.0 for s in self.noise.values()) and not self.delay_periods
                 and not self.steer_dead_time_s and self.tyre_forces == "oracle"
                 and not self.mpc_overrides and not self.vehicle_overrides
+                and not self.allocator_overrides
                 and self.localisation == "none")
 
 
 IDEAL = Condition()
 
 _KEYS = {"name", "noise", "delay_periods", "steer_dead_time_ms", "tyre_forces", "mu_nominal",
-         "mpc_overrides", "vehicle_overrides", "seed", "known_delays", "localisation"}
+         "mpc_overrides", "allocator_overrides", "vehicle_overrides", "seed", "known_delays",
+         "localisation"}
 
 
 def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Condition:
@@ -93,6 +97,7 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         tyre_forces=str(d.get("tyre_forces", "oracle")),
         mu_nominal=float(d.get("mu_nominal", 0.8)),
         mpc_overrides=dict(d.get("mpc_overrides") or {}),
+        allocator_overrides=dict(d.get("allocator_overrides") or {}),
         vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
         seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0),
         known_delays=_flag(d.get("known_delays", False), "known_delays"),
@@ -184,7 +189,7 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
     * ``mpc_node``: the model-mismatch overrides, with ``known_delays`` the delay and dead
       time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ (the
       state carries no adhesion);
-    * ``allocator_node``: ``tyre_forces`` and ``mu_nominal``.
+    * ``allocator_node``: the allocator overrides, ``tyre_forces`` and ``mu_nominal``.
     """
     if condition.ideal:
         return {"plant_node": {}, "mpc_node": {}, "allocator_node": {}}
@@ -207,8 +212,8 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
     if condition.known_delays:
         mpc.setdefault("input_delay_periods", int(condition.delay_periods))
         mpc.setdefault("steer_dead_time_s", float(condition.steer_dead_time_s))
-    alloc: dict[str, Any] = {}
+    alloc: dict[str, Any] = dict(condition.allocator_overrides)
     if condition.tyre_forces == "estimated":
         mpc.setdefault("mu_default", float(condition.mu_nominal))
-        alloc = {"tyre_forces": "estimated", "mu_nominal": float(condition.mu_nominal)}
+        alloc.update({"tyre_forces": "estimated", "mu_nominal": float(condition.mu_nominal)})
     return {"plant_node": plant, "mpc_node": mpc, "allocator_node": alloc}

@@ -142,7 +142,8 @@ def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarra
                 state_bounds: bool, from_step: int, softness: float) -> None:
     """Stage 4: the step's rows of A and the bounds (lo, hi), in place, in the row order of
     :class:`~fourws_mpc.core.qp.QpLayout` (Δũ box, ε ≥ 0, u bounds, v_y and r above and
-    below (hard, or soft with ``softness`` > 0), soft φ and Y above, soft below); A's Δũ box and ε rows are the layout's constants."""
+    below (hard, or soft with ``softness`` > 0), soft φ and Y above, soft below); A's Δũ
+    box and ε rows are the layout's constants."""
     n2, ncol = th_out.shape
     nu = u_prev.shape[0]
     n_c = ncol // nu

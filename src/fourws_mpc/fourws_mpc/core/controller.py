@@ -60,6 +60,7 @@ from fourws_mpc.core.delay import (
     predict_over_delay,
     register_schedule,
 )
+from fourws_mpc.core.friction_model import Grip
 from fourws_mpc.core.fuzzy_weights import FuzzyWeights
 from fourws_mpc.core.grip import (
     GripEstimate,
@@ -70,7 +71,6 @@ from fourws_mpc.core.grip import (
     steer_window,
     yaw_moment_bound,
 )
-from fourws_mpc.core.friction_model import Grip
 from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_model
 from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution

@@ -61,6 +61,7 @@ import inspect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -226,10 +227,10 @@ def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float
     free = [(ln[3] - w) / 2.0 for ln in lanes]
     if min(free) <= 0.0:
         raise ValueError(f"path.vehicle_width_m: {w} m does not fit the course's lanes")
-    steps = [[0.5 * (a[1] + b[0]), b[2] - a[2], 1.0] for a, b in zip(lanes, lanes[1:])]
+    steps = [[0.5 * (a[1] + b[0]), b[2] - a[2], 1.0] for a, b in pairwise(lanes)]
     y0 = lanes[0][2]
     checks = [[(a[1], a[2], fa), (b[0], b[2], fb)]
-              for a, b, fa, fb in zip(lanes, lanes[1:], free, free[1:])]
+              for (a, b), (fa, fb) in zip(pairwise(lanes), pairwise(free), strict=True)]
     for _ in range(6):
         for i in range(len(steps)):
             lo, hi = 1e-3, 5.0

@@ -1,0 +1,150 @@
+"""The limit bench's metrics (``core.limit_metrics``) and report rules (``limits_report``)
+on constructed runs, and the ISO 3888-2 course they are checked on."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fourws_bringup import limits_report as L
+from fourws_bringup.core.limit_metrics import (
+    LANE_FREE_M,
+    SPIN_SIDESLIP_DEG,
+    VEHICLE_LENGTH_M,
+    VEHICLE_WIDTH_M,
+    braking_distance,
+    cone_excess,
+    delivered_yaw_moment,
+    limit_metrics,
+)
+from fourws_mpc.core.reference import Reference
+from fourws_sim.core.paths import iso3888_2, iso3888_2_lanes, peak_lateral_accel_demand
+
+B, R = 1.3, 0.27
+
+
+def _log(y, beta_deg, vx=16.0, mu=0.5, reason="end of scenario", lanes=(), mz=None,
+         wheels=None, drive=None, completed=True):
+    n = len(y)
+    x = np.linspace(0.0, vx * 0.01 * (n - 1), n)
+    xs = np.linspace(-20.0, 400.0, 8401)
+    ref = Reference.from_arrays(xs, np.zeros_like(xs), np.zeros_like(xs),
+                                np.full_like(xs, 0.01), np.full_like(xs, vx))
+    state = {"x": x, "y": np.asarray(y, float), "yaw": np.zeros(n), "vx": np.full(n, vx),
+             "sideslip": np.radians(np.asarray(beta_deg, float)),
+             "yaw_rate": np.full(n, 0.1), "mu": np.full((n, 4), mu)}
+    return SimpleNamespace(
+        state=state, reference=ref, reason=reason, completed=completed, lanes=lanes,
+        mpc={"yaw_moment": np.zeros(n) if mz is None else np.asarray(mz, float)},
+        wheel_torque_cmd_nm=np.zeros((n, 4)) if wheels is None else np.asarray(wheels),
+        drive_torque_nm=np.zeros(n) if drive is None else np.asarray(drive, float))
+
+
+def test_a_clean_run_and_its_demand():
+    m = limit_metrics(_log(np.zeros(50), np.full(50, 2.0)), B, R)
+    assert not m["spin"] and not m["lane_violation"] and m["completed_clean"]
+    assert m["demand_mug"] == pytest.approx(0.01 * 16.0 ** 2 / (0.5 * 9.81), rel=1e-9)
+    assert m["yaw_rate_ratio"] == pytest.approx(0.1 / (0.5 * 9.81 / 16.0), rel=1e-9)
+
+
+def test_spin_is_a_sideslip_of_ten_degrees_or_an_abort_on_it():
+    beta = np.zeros(50)
+    beta[20] = SPIN_SIDESLIP_DEG
+    assert limit_metrics(_log(np.zeros(50), beta), B, R)["spin"]
+    beta[20] = SPIN_SIDESLIP_DEG - 0.1
+    m = limit_metrics(_log(np.zeros(50), beta), B, R)
+    assert not m["spin"]
+    m = limit_metrics(_log(np.zeros(50), np.zeros(50),
+                           reason="aborted: sideslip +30.1° beyond ±30°"), B, R)
+    assert m["spin"] and not m["completed_clean"]
+
+
+def test_the_lane_rule_off_a_cone_course():
+    y = np.zeros(50)
+    y[10] = LANE_FREE_M + 0.01
+    assert limit_metrics(_log(y, np.zeros(50)), B, R)["lane_violation"]
+    y[10] = LANE_FREE_M - 0.01
+    assert not limit_metrics(_log(y, np.zeros(50)), B, R)["lane_violation"]
+
+
+def test_the_cones_see_the_body_box_at_its_yaw():
+    lanes = ((0.0, 10.0, 0.0, 2.0),)
+    x = np.array([5.0])
+    # straight: half-width 0.75, so the CG may sit 0.25 m off the centre
+    assert cone_excess(lanes, x, np.array([0.25]), np.zeros(1)) == pytest.approx(0.0)
+    assert cone_excess(lanes, x, np.array([0.35]), np.zeros(1)) == pytest.approx(0.1)
+    yaw = math.radians(5.0)
+    half = 0.5 * (VEHICLE_WIDTH_M * math.cos(yaw) + VEHICLE_LENGTH_M * math.sin(yaw))
+    assert cone_excess(lanes, x, np.array([0.25]), np.array([yaw])) == pytest.approx(
+        0.25 + half - 1.0)
+    assert cone_excess(lanes, np.array([12.0]), np.array([3.0]), np.zeros(1)) == 0.0
+
+
+def test_unmet_yaw_moment_and_drive_force_are_demand_less_delivery():
+    wheels = np.array([[-100.0, 100.0, -100.0, 100.0]] * 5)     # 2 B/(2R)·200 N·m of M_z
+    mz_delivered = delivered_yaw_moment(wheels, B, R)
+    np.testing.assert_allclose(mz_delivered, B / (2 * R) * 400.0)
+    m = limit_metrics(_log(np.zeros(5), np.zeros(5), mz=mz_delivered + 50.0, wheels=wheels,
+                           drive=np.full(5, 27.0)), B, R)
+    assert m["unmet_mz_max_nm"] == pytest.approx(50.0)
+    assert m["unmet_fx_max_n"] == pytest.approx(27.0 / R)
+
+
+def test_braking_distance_from_the_reference_drop_to_the_final_speed():
+    x = np.linspace(0.0, 100.0, 101)
+    v_ref = np.where(x < 20.0, 20.0, np.maximum(20.0 - 0.25 * (x - 20.0), 6.0))
+    vx = np.where(x < 30.0, 20.0, np.maximum(20.0 - 0.25 * (x - 30.0), 6.0))
+    # the reference drops below 19.9 m/s at X = 21 m; the car reaches 6.5 m/s at X = 84 m
+    assert braking_distance(x, vx, v_ref) == pytest.approx(84.0 - 21.0)
+    assert math.isnan(braking_distance(x, vx, np.full_like(x, 20.0)))
+
+
+def test_the_iso3888_2_course_has_the_standards_lanes_and_its_centre_line_fits_them():
+    w = 1.5
+    lanes = iso3888_2_lanes(w)
+    (e0, e1, ey, ew), (s0, s1, sy, sw), (x0, x1, xy, xw) = lanes
+    assert (e1 - e0, s0 - e1, s1 - s0, x0 - s1, x1 - x0) == pytest.approx(
+        (12.0, 13.5, 11.0, 12.5, 12.0))
+    assert (ew, sw, xw) == pytest.approx((1.1 * w + 0.25, w + 1.0, 3.0))
+    assert (sy - sw / 2) - (ey + ew / 2) == pytest.approx(1.0)     # 1 m beyond the entry lane
+    assert xy - xw / 2 == pytest.approx(ey - ew / 2)               # exit's right edge
+    p = iso3888_2(50 / 3.6, w)
+    assert p.lanes == tuple(lanes)
+    assert cone_excess(p.lanes, p.x, p.y, p.yaw) <= 1e-6 + 0.5 * VEHICLE_LENGTH_M * 0.0 + (
+        0.5 * VEHICLE_LENGTH_M * float(np.max(np.abs(np.sin(p.yaw)))))
+    # the body's width alone (yaw aside) stays within the cones along the centre line
+    for a, b, yc, width in lanes:
+        inside = (p.x >= a) & (p.x <= b)
+        assert np.max(np.abs(p.y[inside] - yc)) + w / 2 <= width / 2 + 1e-6
+    assert peak_lateral_accel_demand(p) > 0.9 * 9.81 * 0.9    # 50 km/h: about 1 μg on μ 0.9
+
+
+def _row(c, sc, cond, seed, clean, beta=2.0):
+    return {"controller": c, "scenario": f"limits/{sc}.yaml", "condition": cond,
+            "seed": seed, "completed_clean": clean, "spin": not clean,
+            "max_abs_sideslip_deg": beta, "max_abs_lateral_error_m": 0.1}
+
+
+def test_the_headline_is_the_highest_clean_rung_below_any_failure():
+    rows = [_row("improved", "ladder_dlc_60_mu05_060", "r", s, True) for s in range(2)]
+    rows += [_row("improved", "ladder_dlc_60_mu05_090", "r", 0, True),
+             _row("improved", "ladder_dlc_60_mu05_090", "r", 1, False),
+             _row("improved", "ladder_dlc_60_mu05_110", "r", 0, True),
+             _row("improved", "ladder_dlc_60_mu05_110", "r", 1, True)]
+    best, failed = L.headline(L.cases(rows), "improved", "r", "ladder_dlc_60_mu05_")
+    assert best == 0.6 and failed == [0.9]
+
+
+def test_paired_change_and_twin_failures():
+    rows = [_row("improved", "ladder_dlc_60_mu05_110", "r", s, True, beta=3.0)
+            for s in range(3)]
+    rows += [_row("ampc_4ws", "ladder_dlc_60_mu05_110", "r", s, True, beta=4.0)
+             for s in range(3)]
+    rows += [_row("improved", "ladder_dlc_60_mu05_060", "r", 0, False),
+             _row("ampc_4ws", "ladder_dlc_60_mu05_060", "r", 0, True)]
+    by = L.cases(rows)
+    assert L.paired_change(by, "improved", "ampc_4ws", "r",
+                           "max_abs_sideslip_deg") == pytest.approx([-0.25] * 3)
+    assert L.twin_failures(by) == ["improved fails ladder_dlc_60_mu05_060 (r) where "
+                                   "ampc_4ws completes"]
