@@ -5,7 +5,7 @@ Same sequencing as the lockstep graph (docs/architecture.md, "Timing") at every 
     outputs(k) ──► mpc.step(t_k, outputs(k), mu=mean μ)      → δf, δr, Mz      (mpc_node)
                ──► pid.step(v_ref, vx, T, a_ref)             → T_total         (speed_pid_node)
                ──► allocate(method, T_total, Mz, fz, fy, μ)  → 4 wheel torques (allocator_node)
-               ──► mpc.report_delivered(Mz − unmet Mz)       (when the allocator fell short)
+               ──► mpc.report_delivered(Mz − unmet Mz)       (mpc_node, from wheel_torques)
                ──► plant.step(δf, δr, torques, T)            → outputs(k+1)    (plant_node)
 
 until the scenario ends (its ``check_end``: end X, duration, end of path, or an abort) or
@@ -150,7 +150,7 @@ def run_closed_loop(
         v_ref, a_ref = speed_ref.at(seen.x, seen.y)
         drive = pid.step(v_ref, seen.vx, dt, a_ref)
         a = alloc.allocate(drive.torque_nm, res.yaw_moment, fz, fy, mu)
-        if a.unmet_yaw_moment_nm and hasattr(mpc, "report_delivered"):
+        if hasattr(mpc, "report_delivered"):
             mpc.report_delivered(res.yaw_moment - a.unmet_yaw_moment_nm)
         for name in STATE_FIELDS + WHEEL_FIELDS:
             st[name].append(np.array(getattr(out, name), dtype=float))

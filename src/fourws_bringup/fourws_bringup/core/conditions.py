@@ -187,8 +187,9 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
       (``localisation``), plant overrides
       (``vehicle_overrides``, a YAML mapping) and ``publish_ground_truth``;
     * ``mpc_node``: the model-mismatch overrides, with ``known_delays`` the delay and dead
-      time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ (the
-      state carries no adhesion);
+      time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ and
+      ``mu_from_state`` false (no car measures the adhesion; an adapter's nominal μ in the
+      state is not a measurement);
     * ``allocator_node``: the allocator overrides, ``tyre_forces`` and ``mu_nominal``.
     """
     if condition.ideal:
@@ -215,5 +216,6 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
     alloc: dict[str, Any] = dict(condition.allocator_overrides)
     if condition.tyre_forces == "estimated":
         mpc.setdefault("mu_default", float(condition.mu_nominal))
+        mpc.setdefault("mu_from_state", False)     # whatever a state's μ field holds
         alloc.update({"tyre_forces": "estimated", "mu_nominal": float(condition.mu_nominal)})
     return {"plant_node": plant, "mpc_node": mpc, "allocator_node": alloc}

@@ -123,6 +123,9 @@ class MpcConfig:
     yaw_rate_mu_factor: float = param(0.85, "hard |r| ≤ factor μ g / vx", lo=0.01, hi=10.0)
     mu_default: float = param(1.0, "adhesion used for the yaw-rate bound when the state "
                               "carries none", lo=0.01, hi=3.0)
+    mu_from_state: bool = param(True, "take μ from the state when it carries one (the "
+                                "plant's truth in the idealised world); false: a car, which "
+                                "measures none (estimated, or mu_default)")
     soft_band_y_m: float = param(0.5, "soft bound |Y − Y_ref| ≤ band (1 + ε)", lo=1e-6,
                                  hi=100.0, unit="m")
     soft_band_phi_deg: float = param(8.0, "soft bound |φ − φ_ref| ≤ band (1 + ε)", lo=1e-6,

@@ -81,6 +81,8 @@ from fourws_mpc.core.terminal_cost import terminal_weight
 G = 9.81
 #: appended to the solver status when the QP was solved without the hard state bounds
 STATE_BOUNDS_DROPPED = "hard state bounds dropped (infeasible with them)"
+#: a delivered yaw moment this close to the command (N·m) is the allocator's round-off
+DELIVERED_ROUNDING_NM = 1e-6
 #: in the solver status when ``terminal_cost: lqr`` found no stabilising DARE solution at
 #: this step (the QP is then solved without the terminal cost)
 TERMINAL_COST_SKIPPED = "terminal cost skipped (no stabilising DARE solution)"
@@ -307,11 +309,15 @@ class MpcController:
     def report_delivered(self, yaw_moment_nm: float) -> None:
         """The yaw moment the lower layer delivered for the last command (its demand less
         what it could not meet): the next step starts from it, u(k−1) and the newest command
-        sent, instead of from the one asked for. Non-finite: ``ValueError``, nothing
+        sent, instead of from the one asked for. Within :data:`DELIVERED_ROUNDING_NM` of the
+        command it is the allocator's round-off and changes nothing (the graph and the
+        in-process loop then agree bit for bit). Non-finite: ``ValueError``, nothing
         changes."""
         mz = float(yaw_moment_nm)
         if not math.isfinite(mz):
             raise ValueError(f"delivered yaw moment: not finite ({yaw_moment_nm!r})")
+        if abs(mz - self.u_prev[InputIdx.MZ]) <= DELIVERED_ROUNDING_NM:
+            return                          # the allocator's round-off, not a shortfall
         lim = float(self._u_max[InputIdx.MZ]) if self._enabled[InputIdx.MZ] else 0.0
         self.u_prev = self.u_prev.copy()
         self.u_prev[InputIdx.MZ] = min(max(mz, -lim), lim)
@@ -350,10 +356,12 @@ class MpcController:
         """One control period, in the stages of the module docstring.
 
         t_s: time of the state (s, for the record only); state: the measured state (SI);
-        ref: the reference path; mu: road adhesion for the yaw-rate bound (default
-        ``mu_default``).
+        ref: the reference path; mu: road adhesion, the state's (ignored unless
+        ``mu_from_state``; None: estimated by the friction-aware model, else ``mu_default``).
         """
         meas = self._read_state(state, mu)
+        if not self.cfg.mu_from_state:
+            mu = None                       # a car measures no μ: estimated, or mu_default
         self._stepped = True
         err = self._errors(meas, ref)
         w = self._weights(err)
