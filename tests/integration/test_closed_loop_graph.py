@@ -235,6 +235,16 @@ def test_a_realistic_run_over_topics_equals_the_in_process_loop(tmp_path):
     sensed = tracking_metrics(dataclasses.replace(run, ground_truth=run.mpc_command | {
         "stamp_ns": np.zeros(0, dtype=np.int64)}))
     assert sensed["rmse_heading_error_deg"] != m["rmse_heading_error_deg"]
+    # the limit metrics in metrics.json are the in-process loop's (limit_metrics on the log)
+    from fourws_bringup.core.configs import load_allocator_config
+    from fourws_bringup.core.limit_metrics import limit_metrics
+
+    alloc = load_allocator_config("improved")
+    mine = limit_metrics(log, alloc.track_width_m, alloc.wheel_radius_m)
+    for key in ("spin", "lane_violation", "completed_clean"):
+        assert m[key] == mine[key], key
+    for key in ("demand_mug", "unmet_mz_max_nm", "unmet_fx_max_n"):
+        assert m[key] == pytest.approx(mine[key], rel=1e-9, abs=1e-9), key
 
 
 def test_every_node_reports_its_runtime_on_diagnostics(runs):

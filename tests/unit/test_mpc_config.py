@@ -83,9 +83,13 @@ def test_presets_share_one_cost_scaling_and_constraints():
     for name in set(shared) - own:
         assert getattr(lqr, name) == getattr(mpc[0], name), name
     # beyond the paper: improved with N_p 30, N_c 10 and its own tuned scaling, else improved
+    # but for the tyres: with the friction-aware model the tuning procedure chose a scaling
+    # of worse margin (rho 0.976), so it keeps the linear tyres its scaling was tuned on
     long = _preset("improved_np30")[0]
     improved = _preset("improved")[0]
-    horizon = {"np_baseline", "nc_baseline", "horizons_mode", "controller"}
+    assert long.prediction_model == "single_track_relaxation"
+    horizon = {"np_baseline", "nc_baseline", "horizons_mode", "controller",
+               "prediction_model"}
     for f in dataclasses.fields(MpcConfig):
         if f.name not in horizon | {"scale_y_m", "scale_phi_deg"}:
             assert getattr(long, f.name) == getattr(improved, f.name), f.name

@@ -43,7 +43,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
 
     from .core.configs import check_preset
     from .runner import RunError, controller_preset, prepare_out_dir, run_graph
-    from .scoring import scenario_record, score_run, write_metrics
+    from .scoring import limit_record, scenario_record, score_run, write_metrics
 
     controller_preset(controller)
     try:
@@ -67,6 +67,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     try:
         run = read_run(out_dir)  # once, for the metrics and the figures
         metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller, run=run)
+        metrics.update(limit_record(run, metrics, sc.path.lanes))
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
         metrics = {"scenario": sc.name, "controller": controller, "completed": False,
                    "reason": f"{outcome.reason}; metrics failed: {exc}",

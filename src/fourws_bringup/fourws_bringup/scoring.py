@@ -113,6 +113,39 @@ def scenario_record(scenario: Any) -> dict[str, str]:
             "scenario_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
+def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str, Any]:
+    """The limit metrics (``core.limit_metrics``) of a recorded run, on its true states and
+    the commands of the steps that have all three (yaw moment, drive and wheel torques);
+    B and R are the recorded controller's allocator's. Empty when the bag lacks them."""
+    from types import SimpleNamespace
+
+    from .core.configs import load_allocator_config
+    from .core.limit_metrics import limit_metrics
+
+    ref = recorded_reference(run)
+    s = run.truth
+    if ref is None or not len(s["stamp_ns"]):
+        return {}
+    stamps = np.intersect1d(np.intersect1d(run.mpc_command["stamp_ns"],
+                                           run.drive_command["stamp_ns"]),
+                            run.wheel_torques["stamp_ns"])
+
+    def at(d: dict, key: str) -> np.ndarray:
+        return np.asarray(d[key])[np.searchsorted(d["stamp_ns"], stamps)]
+
+    try:
+        cfg = load_allocator_config(str(metrics.get("controller") or run.controller))
+    except (ValueError, FileNotFoundError):
+        return {}
+    log = SimpleNamespace(
+        state=s, reference=ref, reason=str(metrics.get("reason", "")),
+        completed=bool(metrics.get("completed")), lanes=lanes,
+        mpc={"yaw_moment": at(run.mpc_command, "yaw_moment")},
+        wheel_torque_cmd_nm=at(run.wheel_torques, "torque").reshape(-1, 4),
+        drive_torque_nm=at(run.drive_command, "torque"))
+    return limit_metrics(log, cfg.track_width_m, cfg.wheel_radius_m)
+
+
 def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
               controller: str | None = None, run: RunData | None = None) -> dict:
     """metrics.json content for a run folder or bag, computed from the bag alone.
