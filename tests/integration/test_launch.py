@@ -169,6 +169,9 @@ def test_ctrl_c_stops_every_node_cleanly(ros2_env, domain_id, ros, tmp_path):
     (("mode:=fast",), ("mode", "fast")),
     (("record:=true",), ("bag:=",)),
     (("condition:=no_such_condition",), ("condition", "no_such_condition")),
+    (("scenario:=nosuch",), ("scenario", "nosuch")),
+    (("condition:=realistic", "seed:=abc"), ("seed", "abc", "integer")),
+    (("seed:=3",), ("seed", "condition:=")),
 ])
 def test_a_bad_argument_ends_the_launch_with_a_clear_error(ros2_env, domain_id, args, names):
     proc = _launch(ros2_env, domain_id, "fourws.launch.py", *args)
@@ -238,3 +241,36 @@ def test_ros2_param_describe_shows_the_choices_of_a_string_parameter(ros2_env, d
     text = r.stdout
     assert "Constraints:" in text and "fixed" in text and "fuzzy" in text, text
     assert "Min value:" in text and "Max value:" in text, text
+
+
+def test_respawn_brings_a_killed_mpc_back_and_the_run_completes(ros2_env, domain_id, ros,
+                                                                 tmp_path):
+    """respawn:=true, lockstep: kill -9 the MPC once the plant is running; launch starts it
+    again, the plant's safe hold bridges the gap, and the run completes."""
+    from std_msgs.msg import String
+
+    from fourws_common.qos import LATCHED_QOS
+
+    sim_s: list[float] = [0.0]
+    ros.node.create_subscription(
+        String, "/run/status",
+        lambda m: sim_s.append(float(json.loads(m.data).get("sim_time_s", 0.0))), LATCHED_QOS)
+    scenario = cut_scenario(tmp_path, 60.0)
+    proc = _launch(ros2_env, domain_id, "fourws.launch.py", f"scenario:={scenario}",
+                   "mode:=realtime", "controller:=mpc_4ws", "respawn:=true")
+    try:
+        assert ros.spin_until(lambda: sim_s[-1] > 1.0, 120.0), "the graph never ran"
+        mpc = [p for p in _descendants(proc.pid)
+               if "mpc_node" in Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="ignore")
+               and "python" in Path(f"/proc/{p}/cmdline").read_bytes().decode(errors="ignore")]
+        assert mpc, "no MPC process"
+        for p in mpc:
+            os.kill(p, signal.SIGKILL)
+        log = _finish(proc, 300.0)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert "[mpc_node-" in log and "process has died" in log, log[-3000:]
+    assert log.count("[mpc_node-") > 1 and "Traceback" not in log, log[-4000:]
+    assert "plant_node ended with exit code 0 (COMPLETED)" in log, log[-4000:]
+    assert proc.returncode == 0, log[-3000:]

@@ -48,14 +48,20 @@ class LaunchArgumentError(RuntimeError):
     """A launch argument with a value fourws cannot use; the message names it."""
 
 
-def launch_node(spec: NodeSpec) -> Node:
+#: seconds before a respawned controller process starts again (``respawn:=true``)
+RESPAWN_DELAY_S = 0.5
+
+
+def launch_node(spec: NodeSpec, respawn: bool = False) -> Node:
     """One process of the node table as a launch action (a container keeps its nodes'
-    own names; a lower CPU priority becomes a ``nice`` prefix)."""
+    own names; a lower CPU priority becomes a ``nice`` prefix); ``respawn``: started again
+    :data:`RESPAWN_DELAY_S` after it dies."""
     return Node(package=spec.package, executable=spec.executable,
                 name=None if spec.hosts else spec.name, namespace=spec.namespace,
                 arguments=spec.program_arguments(), ros_arguments=spec.ros_arguments(),
                 exec_name=spec.name, prefix=f"nice -n {spec.nice}" if spec.nice else None,
-                output="screen")
+                output="screen", respawn=respawn,
+                respawn_delay=RESPAWN_DELAY_S if respawn else None)
 
 
 def _arg(context: LaunchContext, name: str) -> str:
@@ -79,12 +85,33 @@ def _choice(context: LaunchContext, name: str, choices: tuple[str, ...]) -> str:
 
 def _condition(context: LaunchContext) -> Any:
     name, seed = _arg(context, "condition"), _arg(context, "seed")
+    if seed:
+        try:
+            int(seed)
+        except ValueError:
+            raise LaunchArgumentError(f"launch argument seed:={seed!r}: expected an "
+                                      "integer") from None
+        if not name:
+            raise LaunchArgumentError(f"launch argument seed:={seed}: the ideal world has no "
+                                      "noise to seed; give condition:= too")
     if not name:
         return IDEAL
     try:
         return load_condition(name, int(seed) if seed else None)
     except (ValueError, OSError) as exc:
         raise LaunchArgumentError(f"launch argument condition:={name!r}: {exc}") from None
+
+
+def _scenario(context: LaunchContext) -> str:
+    """The scenario argument, checked to load before any node starts."""
+    from fourws_sim.core.scenario import load_scenario
+
+    name = _arg(context, "scenario")
+    try:
+        load_scenario(name)
+    except (ValueError, FileNotFoundError) as exc:
+        raise LaunchArgumentError(f"launch argument scenario:={name!r}: {exc}") from None
+    return name
 
 
 def _graph(context: LaunchContext) -> list[Any]:
@@ -99,14 +126,16 @@ def _graph(context: LaunchContext) -> list[Any]:
         raise LaunchArgumentError(f"launch argument bag:={bag!r}: exists already (the "
                                   "recorder creates it)")
     try:
-        specs = graph_specs(_arg(context, "scenario"), _arg(context, "controller"),
+        specs = graph_specs(_scenario(context), _arg(context, "controller"),
                             Path(bag).resolve() if record else None, mode, compose=compose,
                             use_sim_time=_flag(context, "use_sim_time"),
                             condition=_condition(context), namespace=_arg(context, "namespace"))
     except (RunError, ValueError) as exc:
         raise LaunchArgumentError(str(exc)) from None
-    nodes = {s.name: launch_node(s) for s in specs}
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)
+    respawn = _flag(context, "respawn")
+    nodes = {s.name: launch_node(s, respawn and s.name != plant and "recorder" not in s.name)
+             for s in specs}
 
     def plant_ended(event: Any, _context: LaunchContext) -> list[Any]:
         rc = int(event.returncode)
@@ -131,7 +160,7 @@ def _controllers(context: LaunchContext) -> list[Any]:
                               namespace=_arg(context, "namespace"))
     except (RunError, ValueError) as exc:
         raise LaunchArgumentError(str(exc)) from None
-    return [launch_node(s) for s in specs]
+    return [launch_node(s, _flag(context, "respawn")) for s in specs]
 
 
 def _common_arguments() -> list[Any]:
@@ -151,7 +180,10 @@ def _common_arguments() -> list[Any]:
             "the bench: a shipped condition (realistic), a condition YAML or SPEC.yaml#NAME; "
             "empty: ideal")),
         DeclareLaunchArgument("seed", default_value="", description="noise seed of the "
-                              "condition (empty: the condition's, else 0)"),
+                              "condition (empty: the condition's, else 0; needs condition:=)"),
+        DeclareLaunchArgument("respawn", default_value="false", description=(
+            "start a controller process again when it dies (the plant's safe hold bridges "
+            "the gap; the plant and the recorder are never respawned)")),
     ]
 
 
