@@ -18,6 +18,7 @@ setup(
             ("share/" + PACKAGE + "/" + d, glob(d + "/*.yaml") + glob(d + "/*.xml"))
             for d in sorted({p.rsplit("/", 1)[0] for p in glob("config/**/*.yaml", recursive=True)})
         ],
+        ("share/" + PACKAGE + "/config/foxglove", glob("config/foxglove/*.json")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

@@ -258,3 +258,46 @@ def test_every_node_reports_its_runtime_on_diagnostics(runs):
             names.update(s.name for s in msg.status)
     for node in ("plant_node", "mpc_node", "speed_pid_node", "allocator_node"):
         assert f"/{node}" in names and f"/{node}: runtime" in names, (node, names)
+
+
+def _layout_paths(node) -> list[str]:
+    """Every message path a Foxglove layout names (strings that start with a topic)."""
+    if isinstance(node, dict):
+        return [p for v in node.values() for p in _layout_paths(v)]
+    if isinstance(node, list):
+        return [p for v in node for p in _layout_paths(v)]
+    return [node] if isinstance(node, str) and node.startswith("/") else []
+
+
+def test_the_foxglove_layout_names_only_topics_and_fields_a_run_records(runs):
+    """config/foxglove/run_layout.json parses, and every topic and field it plots exists in
+    a recorded run's bag (indices within the array they index)."""
+    import re
+
+    from fourws_bringup.bag.reader import McapBag
+    from fourws_common.resources import config_dir
+
+    layout = json.loads((config_dir("fourws_bringup") / "foxglove" / "run_layout.json")
+                        .read_text())
+    assert set(layout) >= {"configById", "layout"}
+    panels = set(layout["configById"])
+    placed = re.findall(r"[A-Za-z]+![A-Za-z_]+", json.dumps(layout["layout"]))
+    assert set(placed) == panels
+    paths = _layout_paths(layout["configById"])
+    assert len(paths) >= 20
+    folder = runs["improved"][0]
+    with McapBag(folder / "bag") as bag:
+        first = {}
+        for topic, _t, _l, msg in bag.decoded():
+            first.setdefault(topic, msg)
+    for path in paths:
+        topic, _, fields = path.partition(".")
+        assert topic in first, (path, sorted(first))
+        value = first[topic]
+        for part in fields.split(".") if fields else ():
+            name, _, index = part.partition("[")
+            value = getattr(value, name)
+            if index and index != ":]":
+                assert int(index[:-1]) < len(value), path
+                value = value[int(index[:-1])]
+        assert value is not None, path
