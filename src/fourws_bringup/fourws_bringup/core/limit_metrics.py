@@ -7,9 +7,10 @@ car at each step::
     max_abs_sideslip_deg (metrics.py), yaw_rate_ratio = max |r| / (μ g / v_x)
     spin                = |β| ≥ SPIN_SIDESLIP_DEG at any step, or an abort on sideslip
     cone_excess_m       = on a cone course (``ReferencePath.lanes``), the largest distance
-                          by which the body's bounding box (VEHICLE_WIDTH_M × VEHICLE_LENGTH_M
-                          at the car's yaw, centred on its CG) reaches beyond a lane's edge
-                          while the CG is within the lane's X range
+                          by which the body's width (VEHICLE_WIDTH_M, centred on the CG)
+                          reaches beyond a lane's edge while the CG is within the lane's X
+                          range. The yawed footprint is not checked: the courses' centre
+                          lines are built for the width alone (``paths.cone_steepness``)
     lane_violation      = cone_excess_m > 0 on a cone course; elsewhere max |e_Y| >
                           LANE_FREE_M (the free half-width of the ISO 3888-1 side lane for a
                           1.5 m car: (1.2 w + 0.25 − w)/2)
@@ -34,9 +35,8 @@ from fourws_common.wheels import Wheel
 #: a run spins when |β| reaches this (deg): beyond the ~5-7° where a car's rear saturates,
 #: where a driver has lost the car (stated criterion of the bench)
 SPIN_SIDESLIP_DEG = 10.0
-#: car width and length (m) of the lane rule and the cone check (an A-segment car)
+#: car width (m) of the lane rule and the cone check
 VEHICLE_WIDTH_M = 1.5
-VEHICLE_LENGTH_M = 3.5
 #: free half-width of the ISO 3888-1 side lane (1.2 w + 0.25) for that car (m)
 LANE_FREE_M = (1.2 * VEHICLE_WIDTH_M + 0.25 - VEHICLE_WIDTH_M) / 2.0
 G = 9.81
@@ -50,10 +50,10 @@ def delivered_yaw_moment(torque_nm: np.ndarray, track_m: float, radius_m: float
                                          + t[:, Wheel.RR] - t[:, Wheel.RL])
 
 
-def cone_excess(lanes: tuple, x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> float:
-    """The largest distance (m, ≥ 0) the body's box reaches beyond a lane's cones
+def cone_excess(lanes: tuple, x: np.ndarray, y: np.ndarray) -> float:
+    """The largest distance (m, ≥ 0) the body's width reaches beyond a lane's cones
     (module docstring); 0 without lanes."""
-    half = 0.5 * (VEHICLE_WIDTH_M * np.abs(np.cos(yaw)) + VEHICLE_LENGTH_M * np.abs(np.sin(yaw)))
+    half = np.full(np.shape(x), 0.5 * VEHICLE_WIDTH_M)
     worst = 0.0
     for x0, x1, yc, width in lanes:
         inside = (x >= x0) & (x <= x1)
@@ -98,8 +98,8 @@ def limit_metrics(log: Any, track_m: float, radius_m: float) -> dict[str, Any]:
     e_y = np.abs(path_errors(ref, s["x"], s["y"], s["yaw"])[0]) if len(vx) else np.zeros(0)
     max_beta = float(np.max(beta)) if len(beta) else math.nan
     spin = bool(max_beta >= SPIN_SIDESLIP_DEG or "sideslip" in str(log.reason))
-    xs, ys, yaws = (np.asarray(s[k], float) for k in ("x", "y", "yaw"))
-    cones = cone_excess(tuple(log.lanes), xs, ys, yaws) if log.lanes else math.nan
+    xs, ys = (np.asarray(s[k], float) for k in ("x", "y"))
+    cones = cone_excess(tuple(log.lanes), xs, ys) if log.lanes else math.nan
     lane = (cones > 0.0 if log.lanes else bool(len(e_y) and float(np.max(e_y)) > LANE_FREE_M)
             ) or "lateral" in str(log.reason)
 

@@ -45,7 +45,7 @@ the left; ``s`` the arc length from the first sample.
    3 side lane 11 m, w + 1, its near edge 1 m beyond the entry lane's left edge; 4 gap
    12.5 m; 5 exit lane 12 m, max(1.3w + 0.25, 3), its right edge on the entry lane's right
    edge. One tanh step per gap, centred in it, each as gentle as the cones allow the body
-   (:func:`cone_steepness`).
+   (:func:`cone_steepness`), with ``cone_margin_m`` to spare at the lane ends.
 
 ``iso3888`` and ``iso3888_2`` carry their cone lanes (``ReferencePath.lanes``), which the
 limit bench checks the car's body against.
@@ -144,11 +144,12 @@ def tanh_dlc_settled_x(stretch: float = 1.0, **geometry: float) -> float:
 
 
 def iso3888_steepness(
-    vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5
+    vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5, cone_margin_m: float = 0.0
 ) -> tuple[float, float, float, float]:
     """(X_c1, k1, X_c2, k2) of the two tanh steps of the ISO 3888-1 centre line (m, 1/m):
-    each k the smallest that keeps the car's body inside the cones at the four lane ends
-    next to its step, the other step's tail included (a few fixed-point rounds)."""
+    each k the smallest that keeps the car's body ``cone_margin_m`` inside the cones at the
+    four lane ends next to its step, the other step's tail included (a few fixed-point
+    rounds)."""
     lengths = ISO3888_SECTIONS_M
     starts = np.concatenate(([0.0], np.cumsum(lengths)))
     w, h = vehicle_width_m, lane_offset_m
@@ -156,11 +157,12 @@ def iso3888_steepness(
     xc1 = float(starts[1] + lengths[1] / 2.0)
     xc2 = float(starts[3] + lengths[3] / 2.0)
     # (X of a lane end, lane centre Y, half the free width) next to each step
+    m = cone_margin_m
     checks = {
-        1: [(lanes[0][1], lanes[0][2], (lanes[0][3] - w) / 2.0),
-            (lanes[1][0], lanes[1][2], (lanes[1][3] - w) / 2.0)],
-        2: [(lanes[1][1], lanes[1][2], (lanes[1][3] - w) / 2.0),
-            (lanes[2][0], lanes[2][2], (lanes[2][3] - w) / 2.0)],
+        1: [(lanes[0][1], lanes[0][2], (lanes[0][3] - w) / 2.0 - m),
+            (lanes[1][0], lanes[1][2], (lanes[1][3] - w) / 2.0 - m)],
+        2: [(lanes[1][1], lanes[1][2], (lanes[1][3] - w) / 2.0 - m),
+            (lanes[2][0], lanes[2][2], (lanes[2][3] - w) / 2.0 - m)],
     }
     if min(m for c in checks.values() for _, _, m in c) <= 0.0:
         raise ValueError(f"path.vehicle_width_m: {w} m does not fit the ISO 3888-1 lanes")
@@ -218,13 +220,14 @@ def _steps_y(x: float, y0: float, steps: Sequence[tuple[float, float, float]]) -
     return y0 + sum(h / 2.0 * (1.0 + math.tanh(k * (x - xc))) for xc, h, k in steps)
 
 
-def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float
+def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float, cone_margin_m: float = 0.0
                    ) -> list[tuple[float, float, float]]:
     """[(X_c, height, k)] of the tanh steps between consecutive lanes: centred in each gap,
-    each k the smallest that keeps the body within the cones at the two lane ends next to
-    its step, the other steps' tails included (a few fixed-point rounds)."""
+    each k the smallest that keeps the body ``cone_margin_m`` within the cones at the two
+    lane ends next to its step, the other steps' tails included (a few fixed-point
+    rounds)."""
     w = vehicle_width_m
-    free = [(ln[3] - w) / 2.0 for ln in lanes]
+    free = [(ln[3] - w) / 2.0 - cone_margin_m for ln in lanes]
     if min(free) <= 0.0:
         raise ValueError(f"path.vehicle_width_m: {w} m does not fit the course's lanes")
     steps = [[0.5 * (a[1] + b[0]), b[2] - a[2], 1.0] for a, b in pairwise(lanes)]
@@ -245,6 +248,7 @@ def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float
 def iso3888_2(
     speed_mps: float,
     vehicle_width_m: float = 1.5,
+    cone_margin_m: float = 0.0,
     x_start_m: float = DEFAULT_X_START_M,
     x_end_m: float | None = None,
     spacing_m: float = DEFAULT_SPACING_M,
@@ -252,7 +256,7 @@ def iso3888_2(
 ) -> ReferencePath:
     """Smooth centre line of the ISO 3888-2 course (section 1 starts at X = 0)."""
     lanes = iso3888_2_lanes(vehicle_width_m)
-    steps = cone_steepness(lanes, vehicle_width_m)
+    steps = cone_steepness(lanes, vehicle_width_m, cone_margin_m)
     if x_end_m is None:
         x_end_m = sum(ISO3888_2_SECTIONS_M) + LEAD_OUT_M
     x = _x_grid(x_start_m, x_end_m, spacing_m)
@@ -352,13 +356,14 @@ def iso3888(
     speed_mps: float,
     vehicle_width_m: float = 1.5,
     lane_offset_m: float = 3.5,
+    cone_margin_m: float = 0.0,
     x_start_m: float = DEFAULT_X_START_M,
     x_end_m: float | None = None,
     spacing_m: float = DEFAULT_SPACING_M,
     speed_profile_kmh: Sequence | None = None,
 ) -> ReferencePath:
     """Smooth centre line of the ISO 3888-1 double lane change (section 1 starts at X = 0)."""
-    xc1, k1, xc2, k2 = iso3888_steepness(vehicle_width_m, lane_offset_m)
+    xc1, k1, xc2, k2 = iso3888_steepness(vehicle_width_m, lane_offset_m, cone_margin_m)
     if x_end_m is None:
         x_end_m = sum(ISO3888_SECTIONS_M) + LEAD_OUT_M
     x = _x_grid(x_start_m, x_end_m, spacing_m)
