@@ -145,3 +145,14 @@ def test_paired_change_and_twin_failures():
                            "max_abs_sideslip_deg") == pytest.approx([-0.25] * 3)
     assert L.twin_failures(by) == ["improved fails ladder_dlc_60_mu05_060 (r) where "
                                    "ampc_4ws completes"]
+
+
+def test_the_shipped_view_takes_each_preset_under_its_own_model():
+    rows = [_row("improved", "ladder_dlc_60_mu05_110", cd, 0, cd.endswith("friction"))
+            for cd in ("realistic_friction", "realistic_linear")]
+    rows += [_row("mpc_4ws", "ladder_dlc_60_mu05_110", cd, 0, cd.endswith("linear"))
+             for cd in ("realistic_friction", "realistic_linear")]
+    rows += [_row("lqr_ff", "ladder_dlc_60_mu05_110", "realistic", 0, True)]
+    by = L.with_shipped(L.cases(rows), {"improved": "friction", "mpc_4ws": "linear"})
+    for c in ("improved", "mpc_4ws", "lqr_ff"):
+        assert L.clean(by[(c, "ladder_dlc_60_mu05_110", "realistic_shipped")]), c

@@ -63,6 +63,20 @@ def cases(rows: Iterable[dict[str, Any]]) -> dict[tuple[str, str, str], list[dic
     return dict(out)
 
 
+def with_shipped(by_case: dict, shipped: dict[str, str]) -> dict:
+    """``by_case`` plus, per world, a ``<world>_shipped`` condition: each controller's runs
+    under the condition of its shipped prediction model (``shipped``: controller → the
+    condition suffix, ``linear`` or ``friction``; a controller without one, a law of its
+    own, under the plain world)."""
+    out = dict(by_case)
+    for (c, sc, cd), runs in by_case.items():
+        for world in ("ideal", "realistic"):
+            model = shipped.get(c)
+            if cd == (f"{world}_{model}" if model else world):
+                out[(c, sc, f"{world}_shipped")] = runs
+    return out
+
+
 def clean(runs: Sequence[dict]) -> bool:
     """Every run of the case completed clean (module docstring)."""
     return bool(runs) and all(_truthy(r.get("completed_clean")) for r in runs)
