@@ -47,9 +47,11 @@ def test_a_realistic_condition_becomes_plant_mpc_and_allocator_parameters():
     assert plant["noise_tau_s"][CHANNELS.index("vx")] == 0.0       # white
     assert plant["delay_periods"] == 1 and plant["steer_dead_time_s"] == pytest.approx(0.04)
     assert plant["tyre_forces"] == "estimated"
-    # the state then carries no adhesion: the MPC's bound uses the nominal μ; the delays are
+    # the state then carries no adhesion: the MPC's bound uses the nominal μ (the
+    # friction-aware presets estimate it), whatever a state's μ field holds; the delays are
     # known (measured on the car) and compensated
-    assert p["mpc_node"] == {"mu_default": 0.8, "input_delay_periods": 1,
+    assert p["mpc_node"] == {"mu_default": 0.8, "mu_from_state": False,
+                             "input_delay_periods": 1,
                              "steer_dead_time_s": pytest.approx(0.04)}
     assert p["allocator_node"] == {"tyre_forces": "estimated", "mu_nominal": 0.8}
     mismatch = node_parameters(load_condition(f"{SPEC}#mismatch_mass_plus20"))
