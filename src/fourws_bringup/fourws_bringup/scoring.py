@@ -116,7 +116,8 @@ def scenario_record(scenario: Any) -> dict[str, str]:
 def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str, Any]:
     """The limit metrics (``core.limit_metrics``) of a recorded run, on its true states and
     the commands of the steps that have all three (yaw moment, drive and wheel torques);
-    B and R are the recorded controller's allocator's. Empty when the bag lacks them."""
+    B and R are the recorded controller's allocator's; a metric that does not apply is
+    left out. Empty when the bag lacks them."""
     from types import SimpleNamespace
 
     from .core.configs import load_allocator_config
@@ -143,7 +144,9 @@ def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str,
         mpc={"yaw_moment": at(run.mpc_command, "yaw_moment")},
         wheel_torque_cmd_nm=at(run.wheel_torques, "torque").reshape(-1, 4),
         drive_torque_nm=at(run.drive_command, "torque"))
-    return limit_metrics(log, cfg.track_width_m, cfg.wheel_radius_m)
+    # a metric that does not apply (no cones, no braking) is left out, never NaN
+    return {k: v for k, v in limit_metrics(log, cfg.track_width_m, cfg.wheel_radius_m).items()
+            if not (isinstance(v, float) and not math.isfinite(v))}
 
 
 def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | None = None,
