@@ -76,9 +76,10 @@ def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
                 ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """((F, ∂F/∂α', ∂F/∂Mz) front, the same rear, ε) at ζ_t."""
     eps, deps = ellipse(mz, p, g)
+    fz_f, fz_r = axle_loads(p)
     out = []
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
         peak = g.mu * fz
         f, df_da, df_dd = force(float(alpha), 2.0 * c, peak * eps, p.tyre_shape_lateral,
                                 p.tyre_curvature_lateral)
@@ -86,11 +87,11 @@ def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
     return out[0], out[1], eps
 
 
-def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
-    """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
+def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelParams,
+               ff: float, fr: float) -> np.ndarray:
+    """The rows v̇y, v̇x, ṙ of the module docstring written into the relaxation model's
+    f (``out``) with the axle forces ``ff``, ``fr``."""
     S = StateIdx
-    out = relaxation_model.dynamics(zeta, u, p)
-    (ff, _, _), (fr, _, _), _ = axle_forces(zeta, float(u[InputIdx.MZ]), p, g)
     vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
     m, iz = p.mass_kg, p.yaw_inertia_kg_m2
     out[S.VY] = (ff + fr) / m - vx * r
@@ -100,14 +101,20 @@ def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.nda
     return out
 
 
+def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
+    """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
+    (ff, _, _), (fr, _, _), _ = axle_forces(zeta, float(u[InputIdx.MZ]), p, g)
+    return _tyre_rows(relaxation_model.dynamics(zeta, u, p), zeta, u, p, ff, fr)
+
+
 def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact ``(f, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u): the relaxation model's rows of
     the positions, actuators and slips, and the tyre rows of the module docstring."""
     S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
-    _, A, B = relaxation_model.jacobians(zeta, u, p)
-    f = dynamics(zeta, u, p, g)
+    f, A, B = relaxation_model.jacobians(zeta, u, p)
     (ff, dff, mzf), (fr, dfr, mzr), _ = axle_forces(zeta, float(u[I.MZ]), p, g)
+    f = _tyre_rows(f, zeta, u, p, ff, fr)          # the forces computed once per step
     vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
     df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]
     m, iz, a, b = p.mass_kg, p.yaw_inertia_kg_m2, p.a_m, p.b_m

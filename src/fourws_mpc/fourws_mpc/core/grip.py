@@ -28,6 +28,7 @@ flagged.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -80,8 +81,9 @@ def _pole(dt_s: float, tau_s: float) -> float:
 def _axle_sum(zeta: np.ndarray, p: ModelParams, mu: float, eps: float) -> float:
     """F_f + F_r (N) of the axles' Magic Formula at α̂' on a road of μ."""
     total = 0.0
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+    fz_f, fz_r = axle_loads(p)
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
         total += force(float(alpha), 2.0 * c, mu * fz * eps, p.tyre_shape_lateral,
                        p.tyre_curvature_lateral)[0]
     return total
@@ -142,9 +144,10 @@ class GripEstimator:
                 GripMemory(mu))
 
 
-def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:
-    """(α_peak,f, α_peak,r) of the axles (rad): u* C D/K with u* the MF peak argument."""
-    c, e = p.tyre_shape_lateral, p.tyre_curvature_lateral
+@functools.lru_cache(maxsize=8)
+def _peak_argument(c: float, e: float) -> float:
+    """u* = B α at the Magic Formula's peak: root of C atan(u − E(u − atan u)) = π/2
+    (bisection; a constant of the car, so computed once per (C, E))."""
     target = math.tan(math.pi / (2.0 * c))
     lo, hi = 0.0, 50.0
     for _ in range(60):
@@ -153,7 +156,13 @@ def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:
             lo = mid
         else:
             hi = mid
-    u_star = 0.5 * (lo + hi)
+    return 0.5 * (lo + hi)
+
+
+def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:
+    """(α_peak,f, α_peak,r) of the axles (rad): u* C D/K with u* the MF peak argument."""
+    c = p.tyre_shape_lateral
+    u_star = _peak_argument(c, p.tyre_curvature_lateral)
     fz_f, fz_r = axle_loads(p)
     return (u_star * c * mu * fz_f / (2.0 * p.c_cf), u_star * c * mu * fz_r / (2.0 * p.c_cr))
 
@@ -172,8 +181,9 @@ def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float
 def lateral_use(zeta: np.ndarray, p: ModelParams, mu: float) -> float:
     """η_y = max over the axles of |F(α̂')|/D at μ̂ (no longitudinal force)."""
     use = 0.0
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, axle_loads(p)[0]),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, axle_loads(p)[1])):
+    fz_f, fz_r = axle_loads(p)
+    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
+                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
         d = mu * fz
         f = force(float(alpha), 2.0 * c, d, p.tyre_shape_lateral, p.tyre_curvature_lateral)[0]
         use = max(use, abs(f) / d)
