@@ -92,20 +92,28 @@ def _descendants(pid: int) -> set[int]:
 
 
 def test_a_lockstep_launch_records_the_same_run_as_fourws_run(ros2_env, domain_id, tmp_path):
+    """On the second shipped car (``vehicle:=``, ``--vehicle``): the launch puts every node on
+    it as ``fourws run`` does, and both record the same run."""
+    from fourws_sim.core.vehicle_params import load_vehicle_params
+
     scenario = cut_scenario(tmp_path, 60.0)
     out = tmp_path / "run"
     r = subprocess.run(["fourws", "run", "--scenario", str(scenario), "--controller",
-                        "mpc_4ws", "--out", str(out), "--no-plots"], capture_output=True,
-                       text=True, timeout=600)
+                        "mpc_4ws", "--vehicle", "c_segment", "--out", str(out), "--no-plots"],
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     proc = _launch(ros2_env, domain_id, "fourws.launch.py", f"scenario:={scenario}",
-                   "controller:=mpc_4ws", "record:=true", f"bag:={tmp_path / 'launch_bag'}")
+                   "controller:=mpc_4ws", "vehicle:=c_segment", "record:=true",
+                   f"bag:={tmp_path / 'launch_bag'}")
     log = _finish(proc, 600.0)
     assert proc.returncode == 0, log[-4000:]
     assert "plant_node ended with exit code 0 (COMPLETED)" in log, log[-4000:]
     assert "has died" not in log and "Traceback" not in log, log[-4000:]
     launched, ran = read_run(tmp_path / "launch_bag"), read_run(out)
     assert launched.steps == ran.steps > 300
+    car = load_vehicle_params("c_segment")
+    assert launched.state["fz"][0].sum() == pytest.approx(car.mass_kg * car.gravity_mps2,
+                                                          rel=0.02)
     for key in ("x", "y", "yaw", "vx", "vy", "yaw_rate"):
         assert launched.state[key].tolist() == ran.state[key].tolist(), key
     for key in ("delta_front", "delta_rear", "yaw_moment"):
@@ -172,6 +180,7 @@ def test_ctrl_c_stops_every_node_cleanly(ros2_env, domain_id, ros, tmp_path):
     (("scenario:=nosuch",), ("scenario", "nosuch")),
     (("condition:=realistic", "seed:=abc"), ("seed", "abc", "integer")),
     (("seed:=3",), ("seed", "condition:=")),
+    (("vehicle:=no_such_car",), ("vehicle", "no_such_car", "c_segment")),
 ])
 def test_a_bad_argument_ends_the_launch_with_a_clear_error(ros2_env, domain_id, args, names):
     proc = _launch(ros2_env, domain_id, "fourws.launch.py", *args)
@@ -192,7 +201,9 @@ def test_show_args_names_every_preset_and_where_the_clock_goes(ros2_env, domain_
     text = _finish(proc, 120.0)
     assert proc.returncode == 0, text[-3000:]
     flat = " ".join(text.split())
-    for name in list_controllers():
+    from fourws_common.vehicle_info import list_vehicles
+
+    for name in list_controllers() + list_vehicles():
         assert name in flat, (name, flat[-3000:])
     assert "/clock moves with it" in flat and "(/clock and /diagnostics stay global)" not in flat
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from params_helpers import with_car
 
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
@@ -21,7 +22,7 @@ NODE_ONLY = {"sync", "use_sim_time"}
 
 def core_values(path: Path) -> dict:
     values = load_ros_params_yaml(str(path), NODE)
-    return {k: v for k, v in values.items() if k not in NODE_ONLY}
+    return with_car("allocator_node", {k: v for k, v in values.items() if k not in NODE_ONLY})
 
 
 def test_yaml_loads_and_mirrors_the_defaults():

@@ -4,12 +4,12 @@ quasi-static transfer; lateral forces balance m a_y and the yaw moment; μ is th
 import numpy as np
 import pytest
 
+from fourws_common.vehicle_info import read_vehicle_file
 from fourws_sim.core.scenario import load_scenario
 from fourws_sim.core.simulator import Simulator
-from fourws_sim.core.vehicle_params import read_vehicle_yaml
 from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
 
-P = EstimatorParams.from_mapping(read_vehicle_yaml())
+P = EstimatorParams.from_mapping(read_vehicle_file())
 EST = TyreEstimator(P)
 
 

@@ -29,7 +29,8 @@ def _outputs():
 
 
 def test_the_ideal_condition_sets_no_parameter_and_passes_the_truth_through():
-    assert node_parameters(IDEAL) == {"plant_node": {}, "mpc_node": {}, "allocator_node": {}}
+    assert node_parameters(IDEAL) == {"plant_node": {}, "mpc_node": {}, "speed_pid_node": {},
+                                      "allocator_node": {}}
     s = sensors_from_params({}, 0.01)
     out = _outputs()
     assert s.ideal and s.measure(out) is out and s.act("cmd") == "cmd"

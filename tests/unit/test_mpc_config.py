@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
-from params_helpers import core_keys
+from params_helpers import core_keys, with_car
 
 from fourws_bringup.core.configs import list_controllers
 from fourws_common.params import from_mapping, load_ros_params_yaml
@@ -30,19 +30,24 @@ PRESETS = list_controllers()
 
 
 
+
+def _values(path):
+    """The core's values of a params file over the car's, as the node builds them."""
+    return with_car("mpc_node", core_keys(load_ros_params_yaml(str(path), "mpc_node")))
+
 def test_every_shipped_preset_is_checked():
     assert sorted(EXPECTED) == PRESETS
 
 
 def _preset(name):
-    values = core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    values = _values(MPC_YAML)
     path = config_dir("fourws_bringup") / "controllers" / f"{name}.yaml"
     values.update(load_ros_params_yaml(str(path), "mpc_node"))
     return from_mapping(MpcConfig, values), load_ros_params_yaml(str(path), "allocator_node")
 
 
 def test_mpc_yaml_holds_every_default():
-    values = core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node"))
+    values = _values(MPC_YAML)
     names = {f.name for f in dataclasses.fields(MpcConfig)}
     assert set(values) == names
     assert from_mapping(MpcConfig, values) == MpcConfig()
@@ -125,7 +130,7 @@ def test_unknown_key_is_rejected():
 def test_cost_scaling_in_yaml_is_the_equal_effect_derivation():
     from fourws_mpc.core.cost_scaling import equal_effect_scaling
 
-    cfg = MpcConfig.from_mapping(core_keys(load_ros_params_yaml(str(MPC_YAML), "mpc_node")))
+    cfg = MpcConfig.from_mapping(_values(MPC_YAML))
     derived = equal_effect_scaling(cfg, 60.0 / 3.6)
     for key, value in derived.items():
         assert getattr(cfg, key) == pytest.approx(value, rel=0.02), key

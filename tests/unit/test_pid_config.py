@@ -6,7 +6,7 @@ import dataclasses
 
 import pytest
 import yaml
-from params_helpers import core_keys
+from params_helpers import core_keys, with_car
 
 from fourws_common.params import from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
@@ -17,14 +17,19 @@ NODE = "/**/speed_pid_node"
 
 
 
+
+def _values(path):
+    """The core's values of a params file over the car's, as the node builds them."""
+    return with_car("speed_pid_node", core_keys(load_ros_params_yaml(str(path), NODE)))
+
 def test_yaml_loads_and_mirrors_the_defaults():
-    values = core_keys(load_ros_params_yaml(str(YAML), NODE))
+    values = _values(YAML)
     assert set(values) == {f.name for f in dataclasses.fields(SpeedPidConfig)}
     assert from_mapping(SpeedPidConfig, values) == SpeedPidConfig()
 
 
 def test_force_limit_is_four_motors_over_the_wheel_radius():
-    cfg = from_mapping(SpeedPidConfig, core_keys(load_ros_params_yaml(str(YAML), NODE)))
+    cfg = from_mapping(SpeedPidConfig, _values(YAML))
     assert cfg.max_total_torque_nm == 4 * 500.0
     assert cfg.max_force_n == pytest.approx(2000.0 / 0.27)
 
@@ -41,7 +46,7 @@ def test_bad_value_raises_naming_the_key(tmp_path, key, value):
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(data), encoding="utf-8")
     with pytest.raises(ValueError, match=key):
-        from_mapping(SpeedPidConfig, core_keys(load_ros_params_yaml(str(path), NODE)))
+        from_mapping(SpeedPidConfig, _values(path))
 
 
 def test_cross_field_rule_names_both_fields():

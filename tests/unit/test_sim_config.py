@@ -1,4 +1,4 @@
-"""vehicle.yaml ↔ VehicleParams, ranges and cross-field rules."""
+"""The car file ↔ VehicleParams, ranges and cross-field rules."""
 
 from __future__ import annotations
 
@@ -8,12 +8,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from fourws_common.vehicle_info import read_vehicle_file
 from fourws_sim.core.vehicle_params import (
     RECORDED_KEYS,
     VehicleParams,
-    default_vehicle_yaml,
     load_vehicle_params,
-    read_vehicle_yaml,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -22,7 +21,7 @@ CORE = ROOT / "src" / "fourws_sim" / "fourws_sim" / "core"
 
 def test_vehicle_yaml_loads_and_the_dataclass_defaults_mirror_it():
     loaded = load_vehicle_params()
-    raw = read_vehicle_yaml()
+    raw = read_vehicle_file()
     names = {f.name for f in dataclasses.fields(VehicleParams)}
     assert set(raw) - set(RECORDED_KEYS) == names, "vehicle.yaml must set every field"
     assert loaded == VehicleParams()
@@ -55,7 +54,7 @@ def test_unknown_key_and_inconsistent_geometry_raise():
 
 
 def test_a_stale_recorded_cornering_stiffness_is_caught(tmp_path):
-    raw = read_vehicle_yaml(default_vehicle_yaml())
+    raw = read_vehicle_file()
     raw["tyre_cornering_coeff_front"] = 15.0
     path = tmp_path / "vehicle.yaml"
     path.write_text(yaml.safe_dump(raw), encoding="utf-8")
@@ -64,7 +63,7 @@ def test_a_stale_recorded_cornering_stiffness_is_caught(tmp_path):
 
 
 def test_ros_params_file_form_is_accepted(tmp_path):
-    raw = read_vehicle_yaml()
+    raw = read_vehicle_file()
     path = tmp_path / "vehicle.yaml"
     path.write_text(yaml.safe_dump({"plant_node": {"ros__parameters": raw}}), encoding="utf-8")
     assert load_vehicle_params(path) == VehicleParams()
@@ -75,7 +74,7 @@ def test_unreadable_or_broken_vehicle_yaml_names_the_file(tmp_path):
     bad.write_text("mass_kg: 750.0\nwheelbase_m: [2.35\n", encoding="utf-8")
     with pytest.raises(ValueError, match=r"vehicle\.yaml: YAML syntax error at line 3"):
         load_vehicle_params(bad)
-    with pytest.raises(ValueError, match="cannot read"):
+    with pytest.raises(ValueError, match="missing.yaml"):
         load_vehicle_params(tmp_path / "missing.yaml")
 
 

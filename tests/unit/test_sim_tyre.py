@@ -14,10 +14,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fourws_common.vehicle_info import read_vehicle_file
 from fourws_common.wheels import Wheel
 from fourws_sim.core import tyre
 from fourws_sim.core.vehicle import _tyre_forces
-from fourws_sim.core.vehicle_params import load_vehicle_params, read_vehicle_yaml
+from fourws_sim.core.vehicle_params import load_vehicle_params
 
 P = load_vehicle_params()
 FRONT, REAR = P.tyre("front"), P.tyre("rear")
@@ -46,7 +47,7 @@ def test_static_cornering_stiffness_near_the_mpc_numbers_and_recorded_in_yaml():
     cf, cr = P.static_cornering_stiffness()
     assert cf == pytest.approx(28000.0, rel=0.01)
     assert cr == pytest.approx(30000.0, rel=0.01)
-    raw = read_vehicle_yaml()
+    raw = read_vehicle_file()
     assert raw["cornering_stiffness_front_static_n_per_rad"] == pytest.approx(cf, abs=1.0)
     assert raw["cornering_stiffness_rear_static_n_per_rad"] == pytest.approx(cr, abs=1.0)
     assert P.understeer_gradient() > 0.0  # mild understeer

@@ -1,9 +1,11 @@
-"""One name and one nominal value per vehicle constant: the controllers' params files agree
-with the plant's ``vehicle.yaml``, so a model mismatch is always an explicit override."""
+"""One car file, one owner per vehicle constant: every controller takes the car's values
+under the plant's names, its own params files set none of them, so a model mismatch is
+always an explicit override (issue 41, "One car file")."""
 
 import dataclasses
 
 import pytest
+import yaml
 
 from fourws_bringup.core.configs import (
     core_values,
@@ -13,9 +15,15 @@ from fourws_bringup.core.configs import (
     load_pid_config,
     node_values,
 )
-from fourws_sim.core.vehicle_params import load_vehicle_params, read_vehicle_yaml
+from fourws_common.vehicle_info import (
+    list_vehicles,
+    load_vehicle_info,
+    node_vehicle_values,
+    read_vehicle_file,
+)
+from fourws_sim.core.vehicle_params import load_vehicle_params
 
-PLANT = read_vehicle_yaml()
+PLANT = read_vehicle_file()
 PARAMS = load_vehicle_params()
 CONTROLLER_NODES = ("mpc_node", "speed_pid_node", "allocator_node")
 #: constants several nodes use, under the plant's names (issue 16)
@@ -65,6 +73,82 @@ def test_derived_controller_constants_follow_the_plant():
     for end in ("front", "rear"):
         rate = PLANT[f"max_steer_rate_{end}_deg_s"]
         assert getattr(mpc, f"max_dsteer_{end}_deg") == pytest.approx(rate * mpc.dt_s)
+
+
+@pytest.mark.parametrize("node", CONTROLLER_NODES)
+def test_the_package_params_files_set_none_of_the_cars_keys(node):
+    from fourws_bringup.core.configs import package_file
+    from fourws_common.params import load_ros_params_yaml
+    from fourws_common.vehicle_info import load_vehicle_info, node_vehicle_values
+
+    own = set(load_ros_params_yaml(str(package_file(node)), node))
+    car = set(node_vehicle_values(node, load_vehicle_info()))
+    assert car and not own & car, sorted(own & car)
+
+
+@pytest.mark.parametrize("car", list_vehicles())
+def test_every_shipped_car_loads_and_every_controller_takes_its_values(car):
+    """The plant checks the car's recorded values against its own inputs; each controller's
+    constants are the car's (the mean track where B_f and B_r differ; four motors)."""
+    info = load_vehicle_info(car)
+    plant = load_vehicle_params(car)
+    assert plant.understeer_gradient() > 0.0          # a road car understeers
+    mpc = load_mpc_config("improved", {"vehicle_file": car})
+    pid = load_pid_config({"vehicle_file": car})
+    alloc = load_allocator_config("improved", {"vehicle_file": car})
+    assert (mpc.mass_kg, mpc.yaw_inertia_kg_m2, pid.mass_kg, alloc.mass_kg) == (
+        plant.mass_kg, plant.yaw_inertia_kg_m2, plant.mass_kg, plant.mass_kg)
+    assert (mpc.cg_to_front_axle_m, mpc.cg_to_rear_axle_m) == (
+        plant.cg_to_front_axle_m, plant.cg_to_rear_axle_m)
+    rec = plant.recorded_values()
+    assert mpc.cornering_stiffness_front_static_n_per_rad == pytest.approx(
+        rec["cornering_stiffness_front_static_n_per_rad"], rel=5e-3)
+    assert mpc.relaxation_length_rear_m == pytest.approx(
+        rec["relaxation_length_rear_static_m"], rel=5e-3)
+    track = 0.5 * (plant.track_width_front_m + plant.track_width_rear_m)
+    assert mpc.track_width_m == alloc.track_width_m == pytest.approx(track)
+    assert pid.max_total_torque_nm == 4 * plant.motor_torque_max_nm == -pid.min_total_torque_nm
+    assert pid.wheel_radius_m == alloc.wheel_radius_m == info.wheel_radius_m
+
+
+def test_a_second_car_changes_only_the_cars_keys():
+    paper = load_mpc_config("improved")
+    other = load_mpc_config("improved", {"vehicle_file": "c_segment"})
+    changed = {f.name for f in dataclasses.fields(paper)
+               if getattr(paper, f.name) != getattr(other, f.name)}
+    car_keys = set(node_vehicle_values("mpc_node", load_vehicle_info("c_segment")))
+    assert changed and changed <= car_keys
+
+
+def test_a_mismatch_override_wins_over_the_car():
+    cfg = load_mpc_config("improved", {"vehicle_file": "c_segment", "mass_kg": 1500.0})
+    assert cfg.mass_kg == 1500.0
+    assert cfg.yaw_inertia_kg_m2 == load_vehicle_info("c_segment").yaw_inertia_kg_m2
+
+
+@pytest.mark.parametrize(("edit", "needle"), [
+    ({"mass_kg": None}, "mass_kg"),                        # a key left out
+    ({"mass_kg": "heavy"}, "mass_kg"),                     # a wrong type
+    ({"max_steer_rear_deg": 90.0}, "max_steer_rear_deg"),  # out of range
+    ({"relaxation_length_front_static_m": 0.5}, "relaxation_length_front_static_m"),  # stale
+])
+def test_a_bad_car_file_is_an_error_naming_the_key(tmp_path, edit, needle):
+    raw = read_vehicle_file()
+    for k, v in edit.items():
+        if v is None:
+            raw.pop(k)
+        else:
+            raw[k] = v
+    path = tmp_path / "car.yaml"
+    path.write_text(yaml.safe_dump(raw), encoding="utf-8")
+    with pytest.raises(ValueError, match=needle):
+        load_vehicle_info(path)
+        load_vehicle_params(path)
+
+
+def test_an_unknown_car_name_lists_the_known_ones():
+    with pytest.raises(ValueError, match="c_segment.*paper|paper.*c_segment"):
+        load_vehicle_info("no_such_car")
 
 
 def test_a_mismatch_study_is_an_explicit_override():

@@ -35,9 +35,9 @@ from fourws_common.params import param
 from fourws_common.qos import qos_of
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import VEHICLE_IMU, VEHICLE_JOINT_STATES, VEHICLE_ODOM, VEHICLE_STATE
+from fourws_common.vehicle_info import read_vehicle_file
 from fourws_common.wheels import STEER_JOINTS, WHEEL_JOINTS
 from fourws_msgs.msg import VehicleState
-from fourws_sim.core.vehicle_params import read_vehicle_yaml
 from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
 
 from .core.standard_inputs import JointMap, controller_input
@@ -61,8 +61,8 @@ class AdapterConfig:
                                      "road-wheel angles (their mean is used)")
     wheel_joints: tuple = param(list(WHEEL_JOINTS), "JointState names of the wheel spin "
                                 "joints, FL FR RL RR (velocity in rad/s)")
-    vehicle_file: str = param("", "vehicle.yaml of the nominal car for the tyre-force "
-                              "estimate (empty: fourws_sim's)")
+    vehicle_file: str = param("", "car file of the nominal car for the tyre-force "
+                              "estimate (empty: the paper's car)")
     mu_nominal: float = param(0.8, "road adhesion reported to the controllers (not measured)",
                               lo=0.01, hi=3.0)
     wait_for_subscribers: int = param(0, "publish no state until vehicle/state has this many "
@@ -99,7 +99,7 @@ class AdapterNode(Node):
                                f"{self.params.config.yaw_rate_source}")
 
     def _apply(self, cfg: AdapterConfig) -> None:
-        values = read_vehicle_yaml(cfg.vehicle_file or None)
+        values = read_vehicle_file(cfg.vehicle_file or None)
         self.estimator = TyreEstimator(EstimatorParams.from_mapping(
             {**values, "mu_nominal": cfg.mu_nominal}))
         self.joint_map = cfg.joint_map()

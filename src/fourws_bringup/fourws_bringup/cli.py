@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 from pathlib import Path
@@ -39,11 +40,18 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     ``namespace``, ``domain_id``, ``via_adapter``: :func:`~fourws_bringup.runner.run_graph`.
     """
     from fourws_common.exit_codes import ExitCode
+    from fourws_common.vehicle_info import load_vehicle_info
     from fourws_sim.core.scenario import load_scenario
 
     from .core.configs import check_preset
     from .runner import RunError, controller_preset, prepare_out_dir, run_graph
-    from .scoring import limit_record, scenario_record, score_run, write_metrics
+    from .scoring import (
+        limit_record,
+        scenario_record,
+        score_run,
+        vehicle_record,
+        write_metrics,
+    )
 
     controller_preset(controller)
     try:
@@ -52,7 +60,11 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         why = str(exc).removeprefix(f"{Path(controller)}: ")   # the file is named once
         raise RunError(f"controller preset '{controller}': {why}") from None
     try:
-        sc = load_scenario(scenario)
+        load_vehicle_info(condition.vehicle or None)   # the controllers' part of the car
+    except ValueError as exc:
+        raise RunError(f"vehicle: {exc}") from None
+    try:
+        sc = load_scenario(scenario, vehicle=condition.vehicle or None)  # the plant's part
     except (ValueError, FileNotFoundError) as exc:
         why = str(exc).removeprefix(f"{Path(scenario)}: ")  # the file is named once
         raise RunError(f"scenario '{scenario}': {why}") from exc
@@ -76,6 +88,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
             metrics["died"] = outcome.died
             metrics["died_error"] = outcome.died_error
     metrics.update(scenario_record(sc))
+    metrics.update(vehicle_record(condition.vehicle))
     metrics["compose"] = compose
     if namespace.strip("/"):
         metrics["namespace"] = "/" + namespace.strip("/")
@@ -126,6 +139,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 condition = load_condition(args.condition, args.seed)
             except (ValueError, OSError) as exc:
                 raise RunError(f"--condition {args.condition}: {exc}") from None
+        if args.vehicle:
+            condition = dataclasses.replace(condition, vehicle=args.vehicle)
         metrics = run_and_score(args.scenario, args.controller, Path(args.out),
                                 force=args.force, mode=args.mode, plots=not args.no_plots,
                                 compose=args.compose, condition=condition,
@@ -285,8 +300,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "benchmarks/robustness.yaml#all); default ideal")
     r.add_argument("--seed", type=int, default=None, help="noise seed (default: the "
                    "condition's, else 0)")
+    r.add_argument("--vehicle", default=None, help="the car: a shipped car's name ("
+                   "fourws_common/config/vehicles) or a car file; the plant and every "
+                   "controller read it (default: the paper's car)")
     r.add_argument("--namespace", default="", help="ROS namespace of every node and its "
-                   "topics (e.g. car1); /clock and /diagnostics stay global")
+                   "topics (e.g. car1); /diagnostics stays global, the simulated clock "
+                   "moves into the namespace")
     r.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID to run in "
                    "(default: a free one of this host, so parallel runs never meet)")
     r.add_argument("--via-adapter", action="store_true", help="feed the controllers through "

@@ -17,6 +17,7 @@ packages of a ROS install); nothing else in fourws does.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from fourws_common.exit_codes import describe
+from fourws_common.vehicle_info import list_vehicles
 
 from .core.conditions import IDEAL, load_condition
 from .core.configs import list_controllers
@@ -94,21 +96,31 @@ def _condition(context: LaunchContext) -> Any:
         if not name:
             raise LaunchArgumentError(f"launch argument seed:={seed}: the ideal world has no "
                                       "noise to seed; give condition:= too")
-    if not name:
-        return IDEAL
-    try:
-        return load_condition(name, int(seed) if seed else None)
-    except (ValueError, OSError) as exc:
-        raise LaunchArgumentError(f"launch argument condition:={name!r}: {exc}") from None
+    condition = IDEAL
+    if name:
+        try:
+            condition = load_condition(name, int(seed) if seed else None)
+        except (ValueError, OSError) as exc:
+            raise LaunchArgumentError(f"launch argument condition:={name!r}: {exc}") from None
+    vehicle = _arg(context, "vehicle")
+    if vehicle:
+        from fourws_common.vehicle_info import load_vehicle_info
+
+        try:
+            load_vehicle_info(vehicle)
+        except ValueError as exc:
+            raise LaunchArgumentError(f"launch argument vehicle:={vehicle!r}: {exc}") from None
+        condition = dataclasses.replace(condition, vehicle=vehicle)
+    return condition
 
 
-def _scenario(context: LaunchContext) -> str:
-    """The scenario argument, checked to load before any node starts."""
+def _scenario(context: LaunchContext, vehicle: str = "") -> str:
+    """The scenario argument, checked to load on the car before any node starts."""
     from fourws_sim.core.scenario import load_scenario
 
     name = _arg(context, "scenario")
     try:
-        load_scenario(name)
+        load_scenario(name, vehicle=vehicle or None)
     except (ValueError, FileNotFoundError) as exc:
         raise LaunchArgumentError(f"launch argument scenario:={name!r}: {exc}") from None
     return name
@@ -125,11 +137,13 @@ def _graph(context: LaunchContext) -> list[Any]:
     if record and Path(bag).exists():
         raise LaunchArgumentError(f"launch argument bag:={bag!r}: exists already (the "
                                   "recorder creates it)")
+    condition = _condition(context)
     try:
-        specs = graph_specs(_scenario(context), _arg(context, "controller"),
+        specs = graph_specs(_scenario(context, condition.vehicle),
+                            _arg(context, "controller"),
                             Path(bag).resolve() if record else None, mode, compose=compose,
                             use_sim_time=_flag(context, "use_sim_time"),
-                            condition=_condition(context), namespace=_arg(context, "namespace"))
+                            condition=condition, namespace=_arg(context, "namespace"))
     except (RunError, ValueError) as exc:
         raise LaunchArgumentError(str(exc)) from None
     plant = next(s.name for s in specs if "plant_node" in s.graph_names)
@@ -181,6 +195,9 @@ def _common_arguments() -> list[Any]:
             "empty: ideal")),
         DeclareLaunchArgument("seed", default_value="", description="noise seed of the "
                               "condition (empty: the condition's, else 0; needs condition:=)"),
+        DeclareLaunchArgument("vehicle", default_value="", description=(
+            f"the car: a shipped car ({', '.join(list_vehicles())}) or a car file; every "
+            "node reads it (empty: the paper's car)")),
         DeclareLaunchArgument("respawn", default_value="false", description=(
             "start a controller process again when it dies (the plant's safe hold bridges "
             "the gap; the plant and the recorder are never respawned)")),

@@ -209,7 +209,9 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
         specs.insert(1, NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
                                  params_files=files("adapter_node"),
                                  parameters={"wait_for_subscribers": subscribers,
-                                             "mu_nominal": float(condition.mu_nominal)}))
+                                             "mu_nominal": float(condition.mu_nominal),
+                                             **{k: v for k, v in bench["plant_node"].items()
+                                                if k == "vehicle_file"}}))
     _place(specs, namespace, use_sim_time)
     specs = _layout(specs, compose)
     recorder_gate: dict = {"start_gate_topic": VEHICLE_STATE.name}
@@ -253,7 +255,7 @@ def _control_nodes(controller: str, sync: str, bench: dict[str, dict],
                         parameters={**extra, "sync": sync, **waits.get(name, {})})
 
     return [spec("mpc_node", "fourws_mpc", bench["mpc_node"]),
-            spec("speed_pid_node", "fourws_torque_alloc", {}),
+            spec("speed_pid_node", "fourws_torque_alloc", bench["speed_pid_node"]),
             spec("allocator_node", "fourws_torque_alloc", bench["allocator_node"])]
 
 

@@ -113,6 +113,16 @@ def scenario_record(scenario: Any) -> dict[str, str]:
             "scenario_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
+def vehicle_record(vehicle: str) -> dict[str, str]:
+    """The car file a run used (a shipped name or a path; empty: the paper's car) and the
+    SHA-256 of its content (metrics.json's ``vehicle_file``, ``vehicle_sha256``)."""
+    from fourws_common.vehicle_info import vehicle_path
+
+    path = vehicle_path(vehicle or None).resolve()
+    return {"vehicle_file": str(path),
+            "vehicle_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+
+
 def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str, Any]:
     """The limit metrics (``core.limit_metrics``) of a recorded run, on its true states and
     the commands of the steps that have all three (yaw moment, drive and wheel torques);

@@ -298,7 +298,8 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
             cfg = load_mpc_config(c, params["mpc_node"])
             # the plant as the run had it (a condition's vehicle overrides, e.g. slow steering)
             plant = {**plant_values(), **params["plant_node"]}
-            scn = load_scenario(sc).with_vehicle_overrides(plant.get("vehicle_overrides", ""))
+            scn = load_scenario(sc, vehicle=plant.get("vehicle_file") or None
+                                ).with_vehicle_overrides(plant.get("vehicle_overrides", ""))
             mg = margins(cfg, scn.vehicle, scn.speed_mps, delay_periods=cnd.delay_periods,
                          steer_dead_time_s=cnd.steer_dead_time_s)
             rho, pm, dm = f"{mg.spectral_radius:.4f}", (

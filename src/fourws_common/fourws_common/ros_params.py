@@ -61,7 +61,9 @@ class ParamBinding(Generic[T]):
     """Binds a frozen config dataclass to a node's parameters.
 
     ``binding.config`` is always a complete, validated config. ``on_change`` (optional) is
-    called with the new config after a runtime change has been accepted.
+    called with the new config after a runtime change has been accepted. ``defaults``
+    (optional) replace the dataclass defaults of the fields it names (the car's values,
+    :func:`vehicle_defaults`); a params file or the command line still wins over them.
     """
 
     def __init__(
@@ -70,6 +72,7 @@ class ParamBinding(Generic[T]):
         cls: type[T],
         on_change: Callable[[T], None] | None = None,
         skip: tuple[str, ...] = (),
+        defaults: dict[str, Any] | None = None,
     ) -> None:
         self._node = node
         self._cls = cls
@@ -77,13 +80,15 @@ class ParamBinding(Generic[T]):
         self._fields = [f for f in dataclasses.fields(cls) if f.name not in skip]
         values: dict[str, Any] = {}
         overrides = getattr(node, "_parameter_overrides", {})
+        defaults = defaults or {}
         for f in self._fields:
+            default = defaults.get(f.name, f.default)
             given = overrides.get(f.name)
             if (given is not None and isinstance(f.default, float)
                     and given.type_ == Parameter.Type.INTEGER):
                 overrides[f.name] = Parameter(f.name, Parameter.Type.DOUBLE, float(given.value))
             try:
-                node.declare_parameter(f.name, _ros_default(f.default), _descriptor(f))
+                node.declare_parameter(f.name, _ros_default(default), _descriptor(f))
             except InvalidParameterTypeException:
                 raise ValueError(
                     f"parameter '{f.name}' of {node.get_name()}: got {given.value!r} "
@@ -91,9 +96,9 @@ class ParamBinding(Generic[T]):
                 ) from None
             except InvalidParameterValueException:
                 # outside the descriptor's range: the field's own rule says which bound
-                check_field(self._cls, f.name, given.value if given is not None else f.default)
+                check_field(self._cls, f.name, given.value if given is not None else default)
                 raise ValueError(f"parameter '{f.name}' of {node.get_name()}: "
-                                 f"{given.value if given is not None else f.default!r} "
+                                 f"{given.value if given is not None else default!r} "
                                  "is out of range") from None
             values[f.name] = node.get_parameter(f.name).value
         self.config: T = self._build(values)
@@ -129,6 +134,24 @@ class ParamBinding(Generic[T]):
                                               f"raised {type(exc).__name__}: {exc}")
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
+
+
+def vehicle_defaults(node: Node, node_key: str) -> dict[str, Any]:
+    """Declare ``node``'s read-only ``vehicle_file`` parameter (a shipped car's name or a
+    car file's path; empty: the paper's car) and return the parameter defaults the node
+    ``node_key`` takes from that car (:func:`fourws_common.vehicle_info.node_vehicle_values`),
+    for :class:`ParamBinding`'s ``defaults``. ``ValueError`` names a bad file or key."""
+    from fourws_common.vehicle_info import load_vehicle_info, node_vehicle_values
+
+    desc = ParameterDescriptor(description="car file: a name in fourws_common/config/"
+                               "vehicles or a path; empty: the paper's car (read at start)",
+                               read_only=True)
+    try:
+        name = node.declare_parameter("vehicle_file", "", desc).value
+    except InvalidParameterTypeException:
+        raise ValueError(f"parameter 'vehicle_file' of {node.get_name()}: expected a string "
+                         "(a car's name or a file's path)") from None
+    return node_vehicle_values(node_key, load_vehicle_info(name or None))
 
 
 #: Parameters every rclpy node may be given without declaring them.

@@ -39,7 +39,7 @@ from fourws_common.health import WARN, NodeHealth, Runtime
 from fourws_common.input_guard import state_mu
 from fourws_common.node_main import run_node
 from fourws_common.qos import qos_of
-from fourws_common.ros_params import ParamBinding
+from fourws_common.ros_params import ParamBinding, vehicle_defaults
 from fourws_common.state_input import StateHandlers, StateInput
 from fourws_common.topics import (
     MPC_COMMAND,
@@ -65,7 +65,8 @@ CHECKED_FIELDS = (*MEAS_FIELDS, "mu")
 class MpcNode(Node):
     def __init__(self) -> None:
         super().__init__("mpc_node")
-        self.params = ParamBinding(self, MpcConfig, on_change=self._on_params)
+        self.params = ParamBinding(self, MpcConfig, on_change=self._on_params,
+                                   defaults=vehicle_defaults(self, "mpc_node"))
         self.ctrl = make_controller(self.params.config)
         warm_up(self.params.config)     # the compiled kernels loaded before the first state
         self.ref: Reference | None = None

@@ -64,8 +64,10 @@ class PlantNodeConfig:
     localisation: str = param("none", "the pose the controllers receive: none, the measured "
                               "state; ekf, a localisation filter that knows the noise's "
                               "models (core.localisation)", choices=LOCALISATION_METHODS)
+    vehicle_file: str = param("", "car file: a name in fourws_common/config/vehicles or a "
+                              "path; empty: the paper's car (applies to the next run)")
     vehicle_overrides: str = param("", "plant overrides over the scenario's vehicle, a YAML "
-                                   "mapping of vehicle.yaml fields (e.g. a slower steering "
+                                   "mapping of car-file fields (e.g. a slower steering "
                                    "actuator); empty: none")
     publish_ground_truth: bool = param(False, "also publish the true state on "
                                        "/vehicle/ground_truth (realistic conditions)")

@@ -113,8 +113,8 @@ class PlantNode(Node):
         super().__init__("plant_node")
         self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
         cfg = self.params.config
-        self.scenario = load_scenario(cfg.scenario).with_vehicle_overrides(
-            cfg.vehicle_overrides)
+        self.scenario = load_scenario(cfg.scenario, vehicle=cfg.vehicle_file or None
+                                      ).with_vehicle_overrides(cfg.vehicle_overrides)
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s,
                                            steer_dead_time_s=cfg.steer_dead_time_s)
@@ -222,7 +222,8 @@ class PlantNode(Node):
     def _on_params(self, cfg: PlantNodeConfig) -> None:
         # a scenario or vehicle override that would not load is refused now (ValueError:
         # ParamBinding answers the set as failed, naming why), not at the next run
-        load_scenario(cfg.scenario).with_vehicle_overrides(cfg.vehicle_overrides)
+        load_scenario(cfg.scenario, vehicle=cfg.vehicle_file or None).with_vehicle_overrides(
+            cfg.vehicle_overrides)
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
         self.get_logger().info("parameters updated: abort limits apply now; scenario, mode "
                                "and timing apply to the next run")

@@ -40,7 +40,7 @@ from fourws_common.input_guard import (
 from fourws_common.node_main import run_node
 from fourws_common.params import param
 from fourws_common.qos import LATEST_QOS, qos_of
-from fourws_common.ros_params import ParamBinding
+from fourws_common.ros_params import ParamBinding, vehicle_defaults
 from fourws_common.state_input import MATCH_RETRY_PERIOD_S
 from fourws_common.topics import (
     DRIVE_COMMAND,
@@ -82,7 +82,8 @@ MAX_HELD = 100
 class AllocatorNode(Node):
     def __init__(self) -> None:
         super().__init__("allocator_node")
-        self.params = ParamBinding(self, AllocatorNodeConfig, on_change=self._on_params)
+        self.params = ParamBinding(self, AllocatorNodeConfig, on_change=self._on_params,
+                                   defaults=vehicle_defaults(self, "allocator_node"))
         self.alloc = TorqueAllocator(self.params.config.core())
         self.tyre_data = TyreData(self.params.config)
         self.states: dict[int, VehicleState] = {}

@@ -21,7 +21,7 @@ from fourws_common.input_guard import check_reference
 from fourws_common.node_main import run_node
 from fourws_common.path_lookup import SpeedProfile
 from fourws_common.qos import qos_of
-from fourws_common.ros_params import ParamBinding
+from fourws_common.ros_params import ParamBinding, vehicle_defaults
 from fourws_common.state_input import StateHandlers, StateInput
 from fourws_common.topics import DRIVE_COMMAND, REFERENCE_TRAJECTORY
 from fourws_msgs.msg import DriveCommand, ReferenceTrajectory, VehicleState
@@ -34,7 +34,8 @@ NOMINAL_DT_S = 0.01
 class SpeedPidNode(Node):
     def __init__(self) -> None:
         super().__init__("speed_pid_node")
-        self.params = ParamBinding(self, SpeedPidConfig, on_change=self._on_params)
+        self.params = ParamBinding(self, SpeedPidConfig, on_change=self._on_params,
+                                   defaults=vehicle_defaults(self, "speed_pid_node"))
         self.pid = SpeedPid(self.params.config)
         self.profile: SpeedProfile | None = None
         self.prev_ns: int | None = None

@@ -114,8 +114,8 @@ def run_closed_loop(
     """
     params = node_parameters(condition)
     plant = {**plant_values(), **params["plant_node"]}
-    scenario = load_scenario(scenario_name_or_path).with_vehicle_overrides(
-        plant.get("vehicle_overrides", ""))
+    scenario = load_scenario(scenario_name_or_path, vehicle=plant.get("vehicle_file") or None
+                             ).with_vehicle_overrides(plant.get("vehicle_overrides", ""))
     abort = AbortLimits.of(plant["abort_lateral_error_m"], plant["abort_sideslip_deg"])
     mpc_cfg = load_mpc_config(controller_name, {**params["mpc_node"],
                                                 **(mpc_overrides or {})})
@@ -128,7 +128,7 @@ def run_closed_loop(
     sensors = sensors_from_params(plant, dt, initial_command=(0.0, 0.0, np.zeros(4)))
     tyre_data = TyreData(alloc_cfg)
     mpc = make_controller(mpc_cfg)
-    pid = SpeedPid(load_pid_config())
+    pid = SpeedPid(load_pid_config(params["speed_pid_node"]))
     alloc = TorqueAllocator(alloc_cfg)
     p = scenario.path
     ref = mpc_cfg.reference(p.x, p.y, p.yaw, p.curvature, p.speed)

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from fourws_common.params import read_yaml_file
+from fourws_common.vehicle_info import vehicle_path
 from fourws_sim.core.localisation import LOCALISATION_METHODS
 from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, NoiseSpec, noise_specs
 
@@ -50,6 +51,9 @@ class Condition:
     #: the measured state as it is (the paper's and the bench's default); ``ekf``, a
     #: localisation filter that knows the sensors' error models (beyond the paper)
     localisation: str = "none"
+    #: the car (:mod:`fourws_common.vehicle_info`: a shipped name or a car file's path; empty:
+    #: the paper's car). The plant and every controller read it, so it is no mismatch
+    vehicle: str = ""
 
     def __post_init__(self) -> None:
         if self.tyre_forces not in TYRE_SOURCES:
@@ -77,16 +81,18 @@ class Condition:
 
 
 IDEAL = Condition()
+#: the nodes a condition sets parameters of (:func:`node_parameters`)
+NODES = ("plant_node", "mpc_node", "speed_pid_node", "allocator_node")
 
 _KEYS = {"name", "noise", "delay_periods", "steer_dead_time_ms", "tyre_forces", "mu_nominal",
          "mpc_overrides", "allocator_overrides", "vehicle_overrides", "seed", "known_delays",
-         "localisation"}
+         "localisation", "vehicle"}
 
 
 def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Condition:
     """From YAML: ``noise: {y: {sigma: 0.02, tau_s: 1.0}, ...}``, ``delay_periods``,
     ``steer_dead_time_ms``, ``tyre_forces``, ``mu_nominal``, ``mpc_overrides``, ``seed``,
-    ``known_delays``, ``localisation``."""
+    ``known_delays``, ``localisation``, ``vehicle``."""
     unknown = sorted(set(d) - _KEYS)
     if unknown:
         raise ValueError(f"condition: unknown key(s) {unknown} (known: {sorted(_KEYS)})")
@@ -101,7 +107,8 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
         vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
         seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0),
         known_delays=_flag(d.get("known_delays", False), "known_delays"),
-        localisation=str(d.get("localisation", "none")))
+        localisation=str(d.get("localisation", "none")),
+        vehicle=str(d.get("vehicle") or ""))
 
 
 def _flag(v: Any, name: str) -> bool:
@@ -190,10 +197,13 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
       time it compensates, and with estimated tyre data ``mu_default`` = the nominal μ and
       ``mu_from_state`` false (no car measures the adhesion; an adapter's nominal μ in the
       state is not a measurement);
-    * ``allocator_node``: the allocator overrides, ``tyre_forces`` and ``mu_nominal``.
+    * ``allocator_node``: the allocator overrides, ``tyre_forces`` and ``mu_nominal``;
+    * every node, the car's file as ``vehicle_file`` (absolute) when the condition names one.
     """
+    car = {"vehicle_file": str(vehicle_path(condition.vehicle).resolve())} \
+        if condition.vehicle else {}
     if condition.ideal:
-        return {"plant_node": {}, "mpc_node": {}, "allocator_node": {}}
+        return {node: dict(car) for node in NODES}
     plant: dict[str, Any] = {"publish_ground_truth": True, "tyre_forces": condition.tyre_forces}
     if any(spec.sigma > 0.0 for spec in condition.noise.values()):
         zero = NoiseSpec()
@@ -218,4 +228,5 @@ def node_parameters(condition: Condition) -> dict[str, dict[str, Any]]:
         mpc.setdefault("mu_default", float(condition.mu_nominal))
         mpc.setdefault("mu_from_state", False)     # whatever a state's μ field holds
         alloc.update({"tyre_forces": "estimated", "mu_nominal": float(condition.mu_nominal)})
-    return {"plant_node": plant, "mpc_node": mpc, "allocator_node": alloc}
+    return {"plant_node": {**car, **plant}, "mpc_node": {**car, **mpc},
+            "speed_pid_node": dict(car), "allocator_node": {**car, **alloc}}

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from fourws_common.input_guard import InputConfig
 from fourws_common.params import from_mapping, load_ros_params_yaml, read_yaml_file
 from fourws_common.resources import config_dir
+from fourws_common.vehicle_info import load_vehicle_info, node_vehicle_values
 
 if TYPE_CHECKING:  # imported where loaded: the MPC's pulls in numba, osqp and scipy (~0.5 s
     # of every `fourws` start, which mostly only needs the file lists)
@@ -131,19 +132,23 @@ def params_files(node: str, controller: str | None = None) -> list[Path]:
 
 def node_values(node: str, controller: str | None = None,
                 overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """``node``'s parameters merged from :func:`params_files` (later files win), then
+    """``node``'s parameters as the node takes them: the car's values
+    (:func:`fourws_common.vehicle_info.node_vehicle_values`; the car of ``overrides``'
+    ``vehicle_file``, default the paper's), then :func:`params_files` (later files win), then
     ``overrides``."""
-    values: dict[str, Any] = {}
+    overrides = dict(overrides or {})
+    car = load_vehicle_info(overrides.get("vehicle_file") or None)
+    values: dict[str, Any] = node_vehicle_values(node, car)
     for path in params_files(node, controller):
         values.update(load_ros_params_yaml(str(path), node))
-    values.update(overrides or {})
+    values.update(overrides)
     return values
 
 
 def core_values(values: dict[str, Any]) -> dict[str, Any]:
-    """A node's parameters without its node-level input keys (:class:`InputConfig`), i.e.
-    the keys of its core's config dataclass."""
-    node_keys = {f.name for f in dataclasses.fields(InputConfig)}
+    """A node's parameters without its node-level keys (:class:`InputConfig`'s and
+    ``vehicle_file``), i.e. the keys of its core's config dataclass."""
+    node_keys = {f.name for f in dataclasses.fields(InputConfig)} | {"vehicle_file"}
     return {k: v for k, v in values.items() if k not in node_keys}
 
 
@@ -164,11 +169,12 @@ def load_allocator_config(controller: str | None,
                                                                  controller, overrides)))
 
 
-def load_pid_config() -> SpeedPidConfig:
-    """speed_pid.yaml."""
+def load_pid_config(overrides: dict[str, Any] | None = None) -> SpeedPidConfig:
+    """speed_pid.yaml (and ``overrides``) over the car's values."""
     from fourws_torque_alloc.core.pid import SpeedPidConfig
 
-    return from_mapping(SpeedPidConfig, core_values(node_values("speed_pid_node")))
+    return from_mapping(SpeedPidConfig, core_values(node_values("speed_pid_node",
+                                                                overrides=overrides)))
 
 
 def plant_values() -> dict[str, Any]:

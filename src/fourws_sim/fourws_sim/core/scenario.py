@@ -39,6 +39,7 @@ import yaml
 
 from fourws_common.params import read_yaml_file
 from fourws_common.path_lookup import PathIndex, nearest_sample
+from fourws_common.vehicle_info import vehicle_path
 from fourws_sim.core.paths import (
     LEAD_OUT_M,
     ReferencePath,
@@ -174,11 +175,13 @@ def _config_dir(config_dir: Path | None) -> Path:
     return find("fourws_sim")
 
 
-def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario:
+def load_scenario(name_or_path: str, config_dir: Path | None = None,
+                  vehicle: str | Path | None = None) -> Scenario:
     """Load a scenario by name (``<config_dir>/scenarios/<name>.yaml``, config_dir defaulting
-    to the fourws_sim package's) or by file path. Vehicle overrides are merged over
-    ``<config_dir>/vehicle.yaml``. Raises ``ValueError`` with the reason (an unreadable file
-    or a YAML syntax error names the file, and the line and column of the error)."""
+    to the fourws_sim package's) or by file path. Its vehicle overrides are merged over the
+    car file ``vehicle`` (a shipped name or a path; default the paper's car). Raises
+    ``ValueError`` with the reason (an unreadable file or a YAML syntax error names the file,
+    and the line and column of the error)."""
     text = str(name_or_path)
     as_path = Path(text)
     if text.endswith((".yaml", ".yml")) or as_path.is_file():
@@ -193,9 +196,7 @@ def load_scenario(name_or_path: str, config_dir: Path | None = None) -> Scenario
     data = read_yaml_file(path)
     if not isinstance(data, Mapping):
         raise ValueError(f"{path}: expected a mapping at the top level")
-    cfg = _config_dir(config_dir)
-    vehicle_yaml = cfg / "vehicle.yaml"
-    return scenario_from_mapping(data, vehicle_yaml=vehicle_yaml, source=path)
+    return scenario_from_mapping(data, vehicle_yaml=vehicle_path(vehicle), source=path)
 
 
 def _number(section: str, key: str, value: Any, lo: float | None = None,

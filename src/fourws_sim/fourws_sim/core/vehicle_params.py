@@ -1,10 +1,10 @@
-"""Vehicle, tyre and actuator parameters of the plant, and their file ``config/vehicle.yaml``.
+"""Vehicle, tyre and actuator parameters of the plant, read from the car file.
 
 :class:`VehicleParams` is the frozen dataclass (SI, except the ``*_deg`` fields people edit)
 with the quantities derived from it (static loads, tyre coefficients, static cornering
 stiffness, relaxation length, actuator limits, wheel positions); :func:`load_vehicle_params`
-reads vehicle.yaml (plain or in ROS params-file form) through
-:func:`fourws_common.params.read_yaml_file` and checks its recorded derived values. The model
+reads a car file (:mod:`fourws_common.vehicle_info`, default the paper's car) and checks its
+recorded derived values. The model
 that uses them is :class:`fourws_sim.core.vehicle.TwoTrackModel`.
 """
 
@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from fourws_common.params import from_mapping, param, read_yaml_file
+from fourws_common.params import from_mapping, param
+from fourws_common.vehicle_info import read_vehicle_file, vehicle_path
 from fourws_common.wheels import Wheel
 from fourws_sim.core.actuators import ActuatorLimits
 from fourws_sim.core.tyre import TyreCoefficients, cornering_stiffness
@@ -29,8 +30,11 @@ SIGMA_MIN_M = 0.05
 RECORDED_KEYS = (
     "cornering_stiffness_front_static_n_per_rad",
     "cornering_stiffness_rear_static_n_per_rad",
+    "relaxation_length_front_static_m",
+    "relaxation_length_rear_static_m",
 )
-"""Keys of vehicle.yaml that record derived values (not inputs); checked on load."""
+"""Keys of a car file that record derived values (not inputs) for the controllers; checked
+against the file's own inputs on load (:meth:`VehicleParams.recorded_values`)."""
 
 
 @dataclass(frozen=True)
@@ -182,6 +186,13 @@ class VehicleParams:
                                              * self.tyre_nominal_load_n))))
         return np.maximum(sigma, SIGMA_MIN_M)
 
+    def recorded_values(self) -> dict[str, float]:
+        """The derived values a car file records (:data:`RECORDED_KEYS`): per-tyre cornering
+        stiffness and relaxation length at static load, front and rear."""
+        c_f, c_r = self.static_cornering_stiffness()
+        sig_f, sig_r = self.relaxation_length_m(self.static_wheel_loads_n[[Wheel.FL, Wheel.RL]])
+        return dict(zip(RECORDED_KEYS, (c_f, c_r, float(sig_f), float(sig_r)), strict=True))
+
     def understeer_gradient(self) -> float:
         """K_us = m/L (b/(2C_f) − a/(2C_r)) of the linear single-track model, rad/(m/s²)."""
         cf, cr = self.static_cornering_stiffness()
@@ -206,50 +217,30 @@ class VehicleParams:
         return (a, a, -b, -b), (hf, -hf, hr, -hr)
 
 
-def default_vehicle_yaml() -> Path:
-    """Path of the package's vehicle.yaml (source tree or installed share)."""
-    from fourws_common.resources import config_dir
-
-    return config_dir("fourws_sim") / "vehicle.yaml"
-
-
-def read_vehicle_yaml(path: Path | str | None = None) -> dict[str, Any]:
-    """Flat mapping of vehicle.yaml, plain or in ROS params-file form
-    (``node: {ros__parameters: {...}}``); the recorded keys included. Raises ``ValueError``
-    naming the file when it cannot be read or parsed."""
-    path = Path(path) if path is not None else default_vehicle_yaml()
-    data = read_yaml_file(path) or {}
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping at the top level")
-    sections = [v for v in data.values() if isinstance(v, dict) and "ros__parameters" in v]
-    if sections:
-        flat: dict[str, Any] = {}
-        for s in sections:
-            flat.update(s["ros__parameters"] or {})
-        return flat
-    return dict(data)
-
-
 def load_vehicle_params(
     path: Path | str | None = None, overrides: Mapping[str, Any] | None = None
 ) -> VehicleParams:
-    """VehicleParams from vehicle.yaml (default: the package's) with ``overrides`` merged over.
+    """VehicleParams from a car file (a shipped name or a path; default the paper's car) with
+    ``overrides`` merged over.
 
-    The recorded keys (:data:`RECORDED_KEYS`) are checked against the file's own tyre
-    coefficients (within 0.5 %) and then dropped; with overrides the recorded values describe
-    the base file only. Raises ``ValueError`` naming the offending key.
+    The recorded keys (:data:`RECORDED_KEYS`) are checked against the file's own inputs
+    (within 0.5 %) and then dropped; with overrides the recorded values describe the base
+    file only. Raises ``ValueError`` naming the file and the offending key.
     """
-    values = read_vehicle_yaml(path)
+    where = vehicle_path(path)
+    values = read_vehicle_file(where)
     recorded = {k: values.pop(k) for k in RECORDED_KEYS if k in values}
-    base = from_mapping(VehicleParams, values)
-    if recorded:
-        actual = dict(zip(RECORDED_KEYS, base.static_cornering_stiffness(), strict=True))
-        for key, value in recorded.items():
-            if abs(float(value) - actual[key]) > 0.005 * actual[key]:
-                raise ValueError(
-                    f"{key}: vehicle.yaml records {value} but its tyre coefficients give "
-                    f"{actual[key]:.0f} N/rad; update the recorded value"
-                )
+    try:
+        base = from_mapping(VehicleParams, values)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    actual = base.recorded_values()
+    for key, value in recorded.items():
+        if abs(float(value) - actual[key]) > 0.005 * abs(actual[key]):
+            raise ValueError(
+                f"{where}: {key}: the file records {value} but its own inputs give "
+                f"{actual[key]:.6g}; update the recorded value"
+            )
     if overrides:
         values.update(overrides)
         return from_mapping(VehicleParams, values)
