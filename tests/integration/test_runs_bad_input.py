@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 
+import numpy as np
 import pytest
 import yaml
 
@@ -66,3 +67,51 @@ def test_a_node_that_dies_stops_the_run_and_metrics_say_which(tmp_path, compose,
     assert m["compose"] == compose
     assert (out / "logs" / f"{process}.log").read_text().count("q_y") >= 1
     assert (out / "bag" / "metadata.yaml").is_file(), "the run's bag folder is kept"
+
+
+def _on_a_small_disk(tmp_path, kib: int, command: str) -> subprocess.CompletedProcess:
+    """Run ``command`` (a shell line; ``$DISK`` is a ``kib`` KiB tmpfs) in a private mount
+    namespace, then copy ``$DISK/run`` to ``tmp_path/kept``: a real full file system that
+    vanishes with the namespace. Skips, saying why, where no mount namespace can be made."""
+    import shutil
+
+    if shutil.which("unshare") is None:
+        pytest.skip("needs unshare (util-linux) for a private tmpfs")
+    probe = subprocess.run(["unshare", "--mount", "--map-root-user", "sh", "-c",
+                            f"mount -t tmpfs -o size=64k tmpfs {tmp_path}"],
+                           capture_output=True, text=True, timeout=30)
+    if probe.returncode != 0:
+        pytest.skip(f"cannot mount a private tmpfs here: {probe.stderr.strip()}")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    script = (f"DISK={disk}; mount -t tmpfs -o size={kib}k tmpfs $DISK && "
+              f"{{ {command}; }} > {tmp_path}/stdout 2> {tmp_path}/stderr; "
+              f"echo $? > {tmp_path}/rc; cp -a $DISK/run {tmp_path}/kept 2>/dev/null; true")
+    return subprocess.run(["unshare", "--mount", "--map-root-user", "sh", "-c", script],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_a_full_disk_exits_1_naming_it_and_the_bag_recovers_up_to_the_failure(tmp_path):
+    """Issue 41, item 6: ``--out`` on a full file system exited 2 (the bad-argument code)
+    with an AttributeError and left a 0-byte metrics.json."""
+    from fourws_bringup.bag.run_data import read_run
+
+    _on_a_small_disk(tmp_path, 700, "fourws run --scenario dlc_60_mu05 --controller improved "
+                     "--out $DISK/run --no-plots --compose all")
+    rc = int((tmp_path / "rc").read_text())
+    err = (tmp_path / "stderr").read_text()
+    assert rc == 1, err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("fourws run: cannot write") and "No space left on device" in last \
+        and "full" in last and "fourws bag recover" in last, last
+    assert "Traceback" not in err and "AttributeError" not in err, err[-3000:]
+    metrics = json.loads((tmp_path / "stdout").read_text())   # what the run measured
+    assert metrics["completed"] is False and "recorder_node" in metrics["reason"]
+    kept = tmp_path / "kept"
+    assert not (kept / "metrics.json").exists()                  # whole or not at all
+    r = subprocess.run(["fourws", "bag", "recover", str(kept)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    states = read_run(kept).state["stamp_ns"]
+    assert len(states) > 50                                      # the chunks on disk
+    assert set(np.diff(states)) == {10_000_000}                  # from the start, no hole

@@ -96,7 +96,14 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         metrics["via_adapter"] = True
     metrics["condition"] = condition.name
     metrics["seed"] = condition.seed
-    write_metrics(out_dir, metrics)
+    try:
+        write_metrics(out_dir, metrics)
+    except RunError as exc:
+        exc.metrics = metrics            # still printed: nothing the run measured is lost
+        if (out_dir / "bag").is_dir():
+            exc.args = (f"{exc}; the bag keeps the run up to the failure (`fourws bag "
+                        f"recover {out_dir}` once there is space)",)
+        raise
     if plots and (out_dir / "bag").exists():
         try:
             from .report import draw_figures  # matplotlib: only when figures are drawn
@@ -148,7 +155,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                 via_adapter=args.via_adapter)
     except (RunError, ValueError) as exc:
         print(f"fourws run: {exc}", file=sys.stderr)
-        return 2
+        if getattr(exc, "metrics", None) is not None:
+            print(metrics_json(exc.metrics), end="")
+        return int(getattr(exc, "exit_code", 2))
     print(metrics_json(metrics), end="")
     code = metrics.get("exit_code")  # fourws_common.exit_codes.ExitCode
     return int(code) if isinstance(code, int) else 1

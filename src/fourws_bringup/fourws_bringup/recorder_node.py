@@ -66,6 +66,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from fourws_common.exit_codes import ExitCode
 from fourws_common.input_guard import MAX_STAMP_JUMP_NS, Stamp, StampGate
 from fourws_common.node_main import run_node
 from fourws_common.params import param
@@ -388,9 +389,26 @@ class RecorderNode(Node):
                     stamp = cdr_stamp_ns(data)
                     if stamp is not None and stamp >= 0:
                         gaps.add(stamp)
-                self.writer.write(topic, data, now, sent, seq)
+                try:
+                    self.writer.write(topic, data, now, sent, seq)
+                except OSError as exc:
+                    self._write_failed(exc)
+                    return
                 self.received += 1
         return on_message
+
+    def _write_failed(self, exc: OSError) -> None:
+        """A write error (a full disk): keep what is on disk, say so once, and end with exit
+        code 1 (the run then ends as an error naming this node). Called under the lock."""
+        self._finalised = True
+        self.writer.abandon()
+        self.exit_code = ExitCode.ERROR
+        self.done = True
+        self.get_logger().error(
+            f"cannot write the bag {self.writer.path}: {exc.strerror or exc} (the file system "
+            f"of {self.writer.folder} is full or failing); recording stopped after "
+            f"{self.received} messages, {self.writer.chunks_written} chunks on disk: `fourws "
+            f"bag recover {self.writer.folder}` restores them once there is space")
 
     def lost_counts(self) -> dict[str, int]:
         """Messages lost per topic so far (:func:`lost_counts`)."""
@@ -442,7 +460,11 @@ class RecorderNode(Node):
             if self._finalised or self.writer is None:
                 return
             self._finalised = True
-            self.writer.close()
+            try:
+                self.writer.close()
+            except OSError as exc:
+                self._write_failed(exc)
+                return
             counts = {k: r.message_count for k, r in self.writer.records.items()}
             lost_by_topic = self.lost_counts()
         lost = f"; LOST {lost_by_topic}" if lost_by_topic else ""

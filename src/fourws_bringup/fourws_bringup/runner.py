@@ -16,6 +16,7 @@ monitor only shows progress.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -58,7 +59,30 @@ COMPOSE_LAYOUTS: dict[str, tuple[str, tuple[str, ...]] | None] = {
 
 
 class RunError(RuntimeError):
-    """A run could not be started (bad arguments, existing output, unknown preset)."""
+    """A run could not be started (bad arguments, existing output, unknown preset): exit
+    code 2 (``exit_code``)."""
+
+    exit_code = ExitCode.BAD_CONFIG
+
+
+class OutputError(RunError):
+    """The output could not be written for want of space (a full disk, a quota): not the
+    user's argument, so exit code 1."""
+
+    exit_code = ExitCode.ERROR
+
+
+#: errors of a file system that is full, not of a bad path
+NO_SPACE = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
+def output_error(path: Path, exc: OSError, what: str = "cannot write") -> RunError:
+    """The one-line error for an ``OSError`` on ``path``: an :class:`OutputError` naming the
+    file system when it is full, a :class:`RunError` (bad argument) otherwise."""
+    if exc.errno in NO_SPACE:
+        return OutputError(f"{what} {path}: {exc.strerror} (the disk holding {path.parent} "
+                           "is full)")
+    return RunError(f"{what} {path}: {exc.strerror or exc}")
 
 
 def controller_preset(name_or_path: str) -> Path:
@@ -107,7 +131,7 @@ def writable_dir(out_dir: Path) -> None:
         with tempfile.TemporaryFile(dir=out_dir):
             pass
     except OSError as exc:
-        raise RunError(f"cannot write output folder {out_dir}: {exc.strerror or exc}") from None
+        raise output_error(out_dir, exc, "cannot write output folder") from None
 
 
 def prepare_out_dir(out_dir: Path, force: bool, *,

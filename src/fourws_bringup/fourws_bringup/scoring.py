@@ -12,9 +12,11 @@ bags and the tools all score through here; the in-process loop uses the same
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,7 +29,7 @@ from fourws_mpc.core.reference import Reference
 from .bag.errors import BagError
 from .bag.run_data import RunData, read_run
 from .core.metrics import reference_from_arrays, run_metrics
-from .runner import RunError, RunOutcome
+from .runner import RunOutcome, output_error
 
 #: a step whose MPC solve took longer than the control period missed its deadline
 DEADLINE_MS = 10.0
@@ -92,12 +94,18 @@ def metrics_json(metrics: Mapping) -> str:
 
 
 def write_metrics(folder: Path, metrics: Mapping) -> Path:
-    """Write ``folder/metrics.json`` (:func:`metrics_json`); a ``RunError`` if it cannot."""
+    """Write ``folder/metrics.json`` (:func:`metrics_json`) whole or not at all (a temporary
+    file renamed); a ``RunError`` if it cannot, an ``OutputError`` (exit 1) when the disk is
+    full (``runner.output_error``)."""
     path = folder / "metrics.json"
+    tmp = folder / ".metrics.json.tmp"
     try:
-        path.write_text(metrics_json(metrics), encoding="utf-8")
+        tmp.write_text(metrics_json(metrics), encoding="utf-8")
+        os.replace(tmp, path)
     except OSError as exc:
-        raise RunError(f"cannot write {path}: {exc.strerror or exc}") from None
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise output_error(path, exc) from None
     return path
 
 

@@ -97,8 +97,12 @@ def write_metadata(folder: str | Path, *, relative_file_paths: list[str],
                      sort_keys=False, default_flow_style=False)
     path = folder / "metadata.yaml"
     tmp = folder / ".metadata.yaml.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)    # a full disk leaves the last whole metadata.yaml
+        raise
     return path
 
 

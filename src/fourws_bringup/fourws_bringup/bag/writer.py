@@ -170,6 +170,17 @@ class BagWriter:
         return {**self.custom_data, "fourws_state": state,
                 "fourws_chunk_compression": self.compression}
 
+    def abandon(self) -> None:
+        """Stop after a write error (a full disk): close the file as it is, every completed
+        chunk in it, without a summary; metadata.yaml keeps the counts of those chunks (if it
+        can be written at all). ``fourws bag recover`` restores the bag up to the failure."""
+        self.closed = True            # also after a close() that failed half-way
+        if not self._fh.closed:
+            with contextlib.suppress(OSError):
+                self._fh.close()
+        with contextlib.suppress(OSError):
+            self._write_metadata(durable=True, state="write failed")
+
     def close(self) -> None:
         """Finish the MCAP file (last chunk, summary, footer) and write final metadata.yaml."""
         if self.closed:
