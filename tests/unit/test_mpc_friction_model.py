@@ -16,6 +16,7 @@ from fourws_mpc.core.grip import (
     CLAMPED_HIGH,
     CLAMPED_LOW,
     GripEstimator,
+    GripMemory,
     GripSettings,
     peak_slips,
     steer_window,
@@ -154,6 +155,21 @@ def test_saturating_tyres_pull_the_estimate_to_the_road(mu, sign):
         est, mem = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
     assert est.source == "evidence"
     assert est.mu == pytest.approx(mu, rel=1e-3)
+
+
+def test_under_hard_braking_the_estimate_holds_whatever_the_lateral_forces_say():
+    """|a_x| beyond 0.31 μ̂ g: the split of the longitudinal forces between the wheels is not
+    known (split μ under ABS), so a lateral-force deficit is no evidence; μ̂ holds where it
+    was, neither falling to the deficit's μ nor returning to the prior."""
+    e = _estimator(prior=1.0)
+    z, ay = _cornering_state(0.3, 0.9)
+    mem = GripMemory(0.8)
+    brake = -0.35 * 0.8 * P.gravity_mps2
+    for _ in range(100):
+        est, mem = e.estimate(z, brake, ay, 0.0, None, mem, 0.01)
+    assert (est.mu, est.source) == (0.8, "held")
+    est, _ = e.estimate(z, -0.25 * 0.8 * P.gravity_mps2, ay, 0.0, None, mem, 0.01)
+    assert est.source == "evidence" and est.mu < 0.8             # lighter braking: evidence
 
 
 def test_tyres_at_half_their_peak_say_nothing_and_noise_makes_no_evidence():

@@ -72,6 +72,8 @@ class VehicleInfo:
                                        unit="deg")
     max_steer_rear_deg: float = _spec("rear road-wheel angle limit", lo=0.0, hi=60.0,
                                       unit="deg")
+    slip_speed_min_mps: float = _spec("floor of a slip's speed denominator", lo=0.1, hi=20.0,
+                                      unit="m/s")
 
     @property
     def track_width_m(self) -> float:
@@ -163,7 +165,8 @@ def _speed_pid(v: VehicleInfo) -> dict[str, Any]:
 
 def _allocator(v: VehicleInfo) -> dict[str, Any]:
     same = ("wheel_radius_m", "motor_torque_max_nm", "mass_kg", "cg_to_front_axle_m",
-            "cg_to_rear_axle_m", "cg_height_m", "roll_stiffness_front_share")
+            "cg_to_rear_axle_m", "cg_height_m", "roll_stiffness_front_share",
+            "slip_speed_min_mps")
     return {**{k: getattr(v, k) for k in same}, "track_width_m": v.track_width_m}
 
 

@@ -57,7 +57,11 @@ from fourws_msgs.msg import (
     WheelTorques,
 )
 from fourws_torque_alloc.core.allocation import AllocatorConfig, TorqueAllocator
+from fourws_torque_alloc.core.slip_control import WheelMotion
 from fourws_torque_alloc.core.tyre_estimate import TyreData
+
+#: the state fields the wheel-slip limiter reads
+SLIP_FIELDS = ("wheel_speed", "vx", "vy", "yaw_rate", "steer_front", "steer_rear")
 
 
 @dataclass(frozen=True)
@@ -241,11 +245,13 @@ class AllocatorNode(Node):
         out.unmet_torque = out.unmet_yaw_moment = 0.0
         try:
             used = ("fz", "fy", "mu") if self.tyre_data.estimator is None else ("ax", "ay")
-            bad = implausible_fields(state, used)
+            slip = self.params.config.slip_control
+            bad = implausible_fields(state, used + (SLIP_FIELDS if slip else ()))
             if bad:
                 raise ValueError(f"implausible state {', '.join(bad)}")
             fz, fy, mu = self.tyre_data.of(state)
-            res = self.alloc.allocate(drive.torque, mpc.yaw_moment, fz, fy, mu)
+            res = self.alloc.allocate(drive.torque, mpc.yaw_moment, fz, fy, mu,
+                                      WheelMotion.of(state) if slip else None)
             torque = np.asarray(res.torque_nm, dtype=float)
             if not np.all(np.isfinite(torque)):
                 raise ValueError(f"allocation gave non-finite torques {torque.tolist()}")

@@ -48,6 +48,7 @@ from fourws_sim.core.sensing import sensors_from_params
 from fourws_sim.core.simulator import Simulator
 from fourws_torque_alloc.core.allocation import TorqueAllocator
 from fourws_torque_alloc.core.pid import SpeedPid
+from fourws_torque_alloc.core.slip_control import WheelMotion
 from fourws_torque_alloc.core.tyre_estimate import TyreData
 
 STATE_FIELDS = ("t_s", "x", "y", "yaw", "vx", "vy", "yaw_rate", "ax", "ay", "sideslip",
@@ -149,7 +150,7 @@ def run_closed_loop(
         solve.append((clock() - t0) * 1e3 if clock is not None else math.nan)
         v_ref, a_ref = speed_ref.at(seen.x, seen.y)
         drive = pid.step(v_ref, seen.vx, dt, a_ref)
-        a = alloc.allocate(drive.torque_nm, res.yaw_moment, fz, fy, mu)
+        a = alloc.allocate(drive.torque_nm, res.yaw_moment, fz, fy, mu, WheelMotion.of(seen))
         if hasattr(mpc, "report_delivered"):
             mpc.report_delivered(res.yaw_moment - a.unmet_yaw_moment_nm)
         for name in STATE_FIELDS + WHEEL_FIELDS:

@@ -165,6 +165,10 @@ class MpcConfig:
     mu_evidence_deficit: float = param(
         0.1, "the car's lateral force m a_y below the linear tyres' K_f α_f + K_r α_r by this "
         "share of its weight m g is evidence of the peak (grip.py)", lo=0.01, hi=1.0)
+    mu_evidence_max_ax: float = param(
+        0.31, "evidence only under mostly lateral use, |a_x| <= this share of μ̂ g (the "
+        "friction ellipse then takes at most 5 % of the lateral grip); else μ̂ holds "
+        "(grip.py)", lo=0.0, hi=1.0)
     envelope_softness: float = param(
         1e-3, "friction-aware: the β and r bounds are soft, the slack ε relaxing them by this "
         "share of the bound (ε priced by rho like the tracking band)", lo=1e-4, hi=10.0)

@@ -7,7 +7,12 @@ a_y. The car's lateral force is m a_y; the axles' Magic Formula forces at α̂' 
 road μ by the sum F_f(α̂'f; μ F_z,f ε) + F_r(α̂'r; μ F_z,r ε), which grows with μ. When that
 sum in the linear tyres, K_f α̂'f + K_r α̂'r, exceeds |m a_y| by a clear margin
 (``mu_evidence_deficit`` m g, well above the noise of a_y and of the slips), the tyres have
-shown their peak and the μ that matches m a_y is the evidence (bisection). The sum needs no
+shown their peak and the μ that matches m a_y is the evidence (bisection). Evidence is taken
+only under mostly lateral use, |a_x| ≤ ``mu_evidence_max_ax`` μ̂ g (0.31: the friction
+ellipse then takes at most 5 % of the lateral grip, half the evidence margin); under harder
+braking or driving μ̂ holds, since the split of the longitudinal forces between the wheels
+is not known (on split μ under ABS the low side's wheels have spent their grip
+longitudinally, and the single-μ sum read that as a road of μ 0.4). The sum needs no
 yaw acceleration, which a split between the axles would (a filtered ṙ lags a lane change
 and made the split wrong by half). μ̂ follows falling evidence with ``mu_fall_time_s``,
 rising evidence with ``mu_rise_time_s``, and without evidence (linear tyres say nothing of
@@ -54,6 +59,7 @@ class GripSettings:
     floor: float = 0.1
     ceiling: float = 1.2
     evidence_deficit: float = 0.1
+    evidence_max_ax: float = 0.31
     fall_time_s: float = 0.05
     rise_time_s: float = 1.0
 
@@ -134,14 +140,18 @@ class GripEstimator:
             mu, note = self._clamp(float(mu_state))
             return GripEstimate(mu, "state", note), GripMemory(mu)
         mu_prev = self.s.prior if memory is None else memory.mu
-        ev = self.evidence(zeta, ax, ay, mz, mu_prev)
-        target = self.s.prior if ev is None else ev
-        tau = self.s.fall_time_s if target < mu_prev else self.s.rise_time_s
-        mu = mu_prev + (_pole(dt_s, tau) if dt_s > 0.0 else 0.0) * (target - mu_prev)
+        held = abs(ax) > self.s.evidence_max_ax * mu_prev * self.p.gravity_mps2
+        ev = None if held else self.evidence(zeta, ax, ay, mz, mu_prev)
+        if held:
+            mu, source = mu_prev, "held"              # longitudinal use: μ̂ holds
+        else:
+            target = self.s.prior if ev is None else ev
+            tau = self.s.fall_time_s if target < mu_prev else self.s.rise_time_s
+            mu = mu_prev + (_pole(dt_s, tau) if dt_s > 0.0 else 0.0) * (target - mu_prev)
+            source = "prior" if ev is None else "evidence"
         used = math.hypot(ax, ay) / self.p.gravity_mps2
         mu, note = self._clamp(max(mu, used) if math.isfinite(used) else mu)
-        return (GripEstimate(mu, "prior" if ev is None else "evidence", note),
-                GripMemory(mu))
+        return GripEstimate(mu, source, note), GripMemory(mu)
 
 
 @functools.lru_cache(maxsize=8)

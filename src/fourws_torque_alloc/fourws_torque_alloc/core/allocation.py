@@ -97,6 +97,7 @@ from fourws_common.params import param
 from fourws_common.wheels import Wheel
 from fourws_torque_alloc.core.bounded_qp import BoundedQp
 from fourws_torque_alloc.core.bounded_qp import clip_scalar as _clip
+from fourws_torque_alloc.core.slip_control import WheelMotion, limit_slip
 
 METHODS = ("optimal", "optimal_bounded", "rule", "equal", "production")
 PRIORITIES = ("yaw_moment", "total_torque")
@@ -149,6 +150,21 @@ class AllocatorConfig:
     roll_stiffness_front_share: float = param(0.55, "estimated: front share of the roll "
                                               "stiffness (lateral load transfer split)",
                                               lo=0.0, hi=1.0)
+    # the wheel-slip limiter after the allocation (core.slip_control): a car's ABS and TCS
+    slip_control: bool = param(True, "scale a wheel's torque down once its slip passes "
+                               "slip_ratio_on in the torque's direction (ABS, traction control)")
+    slip_ratio_on: float = param(0.10, "slip ratio at which the limiter starts", lo=0.01,
+                                 hi=1.0)
+    slip_ratio_off: float = param(0.25, "slip ratio at which the limiter leaves no torque",
+                                  lo=0.02, hi=2.0)
+    slip_speed_min_mps: float = param(2.5, "below this speed the limiter is off (standstill), "
+                                      "and the slip's denominator floor (the car's)", lo=0.1,
+                                      hi=20.0, unit="m/s")
+
+    def __post_init__(self) -> None:
+        if self.slip_ratio_off <= self.slip_ratio_on:
+            raise ValueError(f"slip_ratio_on, slip_ratio_off: the limiter needs on < off, got "
+                             f"{self.slip_ratio_on} and {self.slip_ratio_off}")
 
     @property
     def torque_capacity_nm(self) -> float:
@@ -450,6 +466,24 @@ class TorqueAllocator:
                     and self.cfg.bounded_solver == "osqp" else None)
 
     def allocate(self, t_nm: float, mz_nm: float, fz_n: np.ndarray, fy_n: np.ndarray,
-                 mu: np.ndarray) -> AllocationResult:
-        """Allocate with ``cfg.method``; see :func:`allocate`."""
-        return allocate(self.cfg.method, t_nm, mz_nm, fz_n, fy_n, mu, self.cfg, self._qp)
+                 mu: np.ndarray, motion: WheelMotion | None = None) -> AllocationResult:
+        """Allocate with ``cfg.method`` (:func:`allocate`), then, given the wheels'
+        ``motion`` and ``cfg.slip_control``, limit each wheel's slip
+        (:func:`~fourws_torque_alloc.core.slip_control.limit_slip`); the unmet demand is
+        what the limited torques leave, the status gains ``slip_limited``."""
+        res = allocate(self.cfg.method, t_nm, mz_nm, fz_n, fy_n, mu, self.cfg, self._qp)
+        if motion is None or not self.cfg.slip_control:
+            return res
+        cfg = self.cfg
+        tq, limited = limit_slip(res.torque_nm, motion, a_m=cfg.cg_to_front_axle_m,
+                                 b_m=cfg.cg_to_rear_axle_m, track_m=cfg.track_width_m,
+                                 radius_m=cfg.wheel_radius_m, kappa_on=cfg.slip_ratio_on,
+                                 kappa_off=cfg.slip_ratio_off,
+                                 v_min_mps=cfg.slip_speed_min_mps)
+        if not limited.any():
+            return res
+        tq.setflags(write=False)
+        removed = res.torque_nm - tq
+        status = "slip_limited" if res.status == "ok" else res.status + ",slip_limited"
+        return AllocationResult(tq, res.unmet_torque_nm + float(removed.sum()),
+                                res.unmet_yaw_moment_nm + yaw_moment_nm(removed, cfg), status)
