@@ -26,7 +26,7 @@ MODELS = ("ideal_linear", "ideal_friction", "realistic_linear", "realistic_frict
 SHIPPED = ("ideal_shipped", "realistic_shipped")
 ALLOC = ("ideal_optimal", "ideal_optimal_bounded", "ideal_rule", "ideal_production",
          "realistic_optimal", "realistic_optimal_bounded", "realistic_rule",
-         "realistic_production")
+         "realistic_production", "realistic_optimal_noslip", "realistic_production_noslip")
 
 
 def _job(jobs, controller: str, scenario: str, condition: str, seed: int = 0):
@@ -196,8 +196,11 @@ def main() -> int:
         "",
         "In the ideal world the controllers take μ and the tyre forces from the plant. Under "
         "the realistic condition they take nothing from it: the MPC estimates μ from the "
-        "lateral acceleration against its tyre model (`grip.py`), the allocator assumes "
-        "μ 0.8 and estimates the loads from the accelerations.",
+        "lateral acceleration against its tyre model (`grip.py`; it holds the estimate while "
+        "|a_x| exceeds 0.31 μ̂ g), the allocator assumes μ 0.8 and estimates the loads from "
+        "the accelerations. In both worlds a wheel-slip limiter after the allocation "
+        "(`slip_control.py`: a car's ABS and traction control, rear axle select-low) scales "
+        "a wheel's torque down from 10 % to 25 % slip; `..._noslip` conditions turn it off.",
         "",
         "### Demand",
         demand_table(by_case),
@@ -210,8 +213,8 @@ def main() -> int:
         "error; the unmet F_x and M_z (demanded against what the wheel torques deliver); the "
         "braking distance. Rules:",
         "",
-        *[("* " + b.replace("\n", " ").strip()) for b in (L.__doc__ or "").split(
-            "Rules, stated once and printed in the report:")[1].split("* ") if b.strip()],
+        *[("* " + " ".join(b.split())) for b in (L.__doc__ or "").split(
+            "Rules, stated once and printed in the report:")[1].split("\n* ") if b.strip()],
         "",
         "## Headline: highest rung or speed passed clean",
         "As shipped (" + ", ".join(f"{c}: {m}" for c, m in shipped.items()) + " tyres; lqr_ff "
@@ -242,7 +245,10 @@ def main() -> int:
         *(f"- {t}" for t in twins), *([] if twins else ["- none"]),
         "",
         "## The front-steer baseline against the textbook LQR",
-        "Cases where lqr_ff stays clean and mpc_fws does not:",
+        "mpc_fws runs without the hard β and yaw-rate bounds (its preset says why: a "
+        "front-steer car cannot hold β and r apart, and the bounds capped its lateral "
+        "acceleration below the friction limit), as lqr_ff; every preset with rear steer "
+        "keeps them. Cases where lqr_ff stays clean and mpc_fws does not:",
         "",
         *fws_lines(by_case),
         "",
