@@ -19,8 +19,9 @@ zero-order hold at the control period T; a computation delay of N periods and a 
 time of D periods (rounded to whole periods) are shift registers on the commands.
 
 **Controller**, its unconstrained gain at the operating point: for the MPC the first move of
-the unconstrained minimiser of eq. (16)-(19) (the condensed Hessian and gradient of ``qp``;
-disabled inputs removed; fuzzy weights at e = 0, horizons at the baseline), acting on
+the unconstrained minimiser of eq. (16)-(19), taken from the controller itself
+(``MpcController.unconstrained_gain``: the QP's condensing, its weights at e = 0, the
+baseline horizons; disabled inputs removed), acting on
 ξ = [ζ; u(k−1)] with ζ the path-frame state of the controller's prediction model
 (``prediction_model``, ``prediction_discretisation``: with ``single_track_actuators`` ζ holds
 the actual road-wheel angles, the plant's δ_f, δ_r); for ``lqr_ff`` δ_f = −K x. The
@@ -49,6 +50,7 @@ below 0 dB (a gain decrease; the MPC's u = u(k−1) + Δu is an integrator) are 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -56,22 +58,12 @@ from typing import Any
 import numpy as np
 
 from fourws_mpc.core.config import MpcConfig
-from fourws_mpc.core.cost_scaling import effective_weights, level_weights
+from fourws_mpc.core.controller import MpcController
 from fourws_mpc.core.delay import channel_delays, register_schedule
-from fourws_mpc.core.fuzzy_weights import mamdani
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
-from fourws_mpc.core.prediction_model import make_prediction_model
-from fourws_mpc.core.qp import (
-    augment,
-    input_level_cost,
-    output_matrix,
-    prediction_matrices,
-    terminal_rows,
-)
 from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, hold_coefficients
-from fourws_mpc.core.terminal_cost import terminal_terms, terminal_weight
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -177,58 +169,22 @@ def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> 
     return A
 
 
+def _controller(cfg: MpcConfig) -> MpcController:
+    """The MPC whose gain the loop closes (no QP instances built ahead: only its cost)."""
+    return MpcController(dataclasses.replace(cfg, osqp_prebuild=False))
+
+
 def model_matrices(cfg: MpcConfig, vx: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A_k, B_k, d_k) of the controller's prediction model at v_x on a straight path, u = 0."""
-    model = make_prediction_model(cfg.prediction_model, cfg.model_params(),
-                                  cfg.prediction_discretisation)
-    zeta0 = np.zeros(N_STATE)
-    zeta0[StateIdx.VX] = vx
-    zeta0, _ = model.measured_state(zeta0, 0.0, 0.0)
-    return model.discretise(zeta0, np.zeros(N_INPUT), cfg.dt_s)
+    """(A_k, B_k, d_k) of the controller's prediction model at v_x on a straight path, u = 0
+    (``MpcController.linearisation``)."""
+    return _controller(cfg).linearisation(vx)
 
 
 def mpc_gain(cfg: MpcConfig, vx: float) -> np.ndarray:
     """K (3, n+3): the MPC's unconstrained first move Δu(k) = −K [ζ; u(k−1)] at (ζ0, u = 0) on
     a straight path, fuzzy weights at e = 0, baseline horizons; n the prediction model's
-    state dimension (6 for eq. (1))."""
-    Ak, Bk, dk = model_matrices(cfg, vx)
-    Aa, Ba, _ = augment(Ak, Bk, dk)
-    n_p, n_c = cfg.np_baseline, cfg.nc_baseline
-    C = output_matrix(n_state=Ak.shape[0])
-    psi, theta, _ = prediction_matrices(Aa, Ba, C, n_p, n_c)
-    no = C.shape[0]
-    rows = np.array([i * no + j for i in range(n_p) for j in (0, 1)])    # φ, Y of each step
-    if cfg.weights_mode == "fuzzy":
-        r = mamdani(np.zeros(()), np.zeros(()), cfg.fuzzy_spec())   # the centre rule
-        w = (r[1] * cfg.q_phi_max, r[0] * cfg.q_y_max, r[2] * cfg.r_ddelta_max,
-             r[3] * cfg.r_dmz_max)
-    else:
-        w = (cfg.q_phi, cfg.q_y, cfg.r_ddelta, cfg.r_dmz)
-    q_eff, r_eff = effective_weights(cfg, *w)
-    D = np.tile(cfg.du_max, n_c)
-    cols = np.flatnonzero(np.tile(cfg.enabled, n_c))
-    th = (theta[rows] * D[None, :])[:, cols]
-    W = np.tile(q_eff, n_p)
-    H = 2.0 * th.T @ (W[:, None] * th) + 2.0 * np.diag((np.tile(r_eff, n_c) * D * D)[cols])
-    G = 2.0 * th.T @ (W[:, None] * psi[rows])                         # gradient = G ξ
-    s_level = level_weights(cfg, r_eff)
-    if np.any(s_level):                       # qp.input_level_cost, u(k−1) the last 3 of ξ
-        M, wl = input_level_cost(n_p, n_c, D, s_level)
-        M = M[:, cols]
-        H += 2.0 * M.T @ (wl[:, None] * M)
-        tile_u = np.zeros((N_INPUT * n_c, psi.shape[1]))
-        tile_u[:, -N_INPUT:] = np.tile(np.eye(N_INPUT), (n_c, 1))
-        G += 2.0 * M.T @ (wl[:, None] * tile_u)
-    if cfg.terminal_cost == "lqr":            # qp.MpcQp.solve's terminal_w
-        Zx, Zu, _ = terminal_rows(Aa, Ba, n_p, n_c)
-        hess, cross = terminal_terms(terminal_weight(Ak, Bk, cfg.enabled, q_eff, r_eff),
-                                     (Zu * D[None, :])[:, cols])
-        H += hess
-        G += cross @ Zx
-    dz = -np.linalg.solve(H, G)                                       # scaled increments
-    full = np.zeros((N_INPUT * n_c, psi.shape[1]))
-    full[cols] = dz
-    return -(full[:N_INPUT] * cfg.du_max[:, None])
+    state dimension (``MpcController.unconstrained_gain``, on the QP's own condensing)."""
+    return _controller(cfg).unconstrained_gain(vx)
 
 
 def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: int = 0,

@@ -73,7 +73,7 @@ from fourws_mpc.core.grip import (
 )
 from fourws_mpc.core.model import N_INPUT, N_STATE, InputIdx, StateIdx
 from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_model
-from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution
+from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution, unconstrained_gain
 from fourws_mpc.core.qp_solver import QpSettings, QpSolver, QpStatus, make_qp_solver
 from fourws_mpc.core.reference import NearestPoint, Reference
 from fourws_mpc.core.terminal_cost import terminal_weight
@@ -479,14 +479,7 @@ class MpcController:
             state_softness=0.0 if pred.grip is None else c.envelope_softness,
             band_phi=math.radians(c.soft_band_phi_deg), band_y=c.soft_band_y_m,
             state_bounds=c.state_bounds, state_bounds_from_step=c.state_bounds_from_step)
-        q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
-        s_level = level_weights(c, r_eff)
-        terminal_w, note = None, ""
-        if c.terminal_cost == "lqr":
-            try:
-                terminal_w = terminal_weight(pred.Ak, pred.Bk, self._enabled, q_eff, r_eff)
-            except (ValueError, np.linalg.LinAlgError):
-                note = f", {TERMINAL_COST_SKIPPED}"
+        q_eff, r_eff, s_level, terminal_w, note = self._cost(w, pred.Ak, pred.Bk)
         sol = self.qp.solve(pred.Ak, pred.Bk, pred.dk, pred.zeta, self.u_prev, pred.ref_out,
                             hz.n_p, hz.n_c, q_eff, r_eff, c.rho, bounds,
                             warm_du_scaled=self._warm(hz.n_c), s_level=s_level,
@@ -505,6 +498,42 @@ class MpcController:
             retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}{note}"
             return retry
         return sol
+
+    def _cost(self, w: _Weights, Ak: np.ndarray, Bk: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str]:
+        """The cost of stage 6: the scaled weights (``cost_scaling``), the level weights and
+        the terminal weight (``terminal_cost``; None and a note when it cannot be had)."""
+        c = self.cfg
+        q_eff, r_eff = effective_weights(c, w.q_phi, w.q_y, w.r_ddelta, w.r_dmz)
+        s_level = level_weights(c, r_eff)
+        terminal_w, note = None, ""
+        if c.terminal_cost == "lqr":
+            try:
+                terminal_w = terminal_weight(Ak, Bk, self._enabled, q_eff, r_eff)
+            except (ValueError, np.linalg.LinAlgError):
+                note = f", {TERMINAL_COST_SKIPPED}"
+        return q_eff, r_eff, s_level, terminal_w, note
+
+    def linearisation(self, vx_mps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A_k, B_k, d_k) of eq. (4) at the straight-path operating point: the prediction
+        model's state at v_x (its appended states from the measurement), u = 0."""
+        zeta = np.zeros(N_STATE)
+        zeta[StateIdx.VX] = vx_mps
+        zeta, _ = self.model.measured_state(zeta, 0.0, 0.0)
+        return self.model.discretise(zeta, np.zeros(N_INPUT), self.cfg.dt_s)
+
+    def unconstrained_gain(self, vx_mps: float) -> np.ndarray:
+        """K (3, n+3) of the step's first move Δu(k) = −K [ζ; u(k−1)] without bounds at the
+        straight-path operating point (:meth:`linearisation`), with the weights stage 3 takes
+        at zero error (the fuzzy centre rule) and the baseline horizons: the gain the
+        stability margins linearise (``fourws_bringup.core.margins``; ``qp.unconstrained_gain``
+        on the QP's own condensing)."""
+        c = self.cfg
+        Ak, Bk, dk = self.linearisation(vx_mps)
+        w = self._weights(_Errors(None, 0.0, 0.0))
+        q_eff, r_eff, s_level, terminal_w, _ = self._cost(w, Ak, Bk)
+        return unconstrained_gain(Ak, Bk, dk, c.np_baseline, c.nc_baseline, q_eff, r_eff,
+                                  self._du_max, self._enabled, s_level, terminal_w)
 
     def _result(self, ref: Reference, err: _Errors, w: _Weights, hz: _Horizons,
                 sol: QpSolution, pred: _Prediction, mu: float | None) -> MpcResult:

@@ -312,6 +312,36 @@ def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return rows[order], cols[order]
 
 
+def unconstrained_gain(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, n_p: int, n_c: int,
+                       q_eff: np.ndarray, r_eff: np.ndarray, du_max: np.ndarray,
+                       enabled: np.ndarray, s_level: np.ndarray | None = None,
+                       terminal_w: np.ndarray | None = None) -> np.ndarray:
+    """K (3, n+3): the first move u(k) − u(k−1) = −K ξ, ξ = [ζ; u(k−1)], of the QP's
+    minimiser without its bounds, on a zero reference: −H⁻¹ ∂g/∂ξ with H and g from
+    :func:`~fourws_mpc.core.condense.condense`, the code :meth:`MpcQp.solve` runs. g is
+    affine in ξ, so its Jacobian is exact column by column; disabled inputs are left out."""
+    n = Ak.shape[0]
+    Aa, Ba, da = augment(Ak, Bk, dk)
+    D = np.tile(np.asarray(du_max, dtype=float), n_c)
+    ref = np.zeros((n_p, 2))
+    W, z_ref = ((_NO_TERMINAL, _ZERO_U) if terminal_w is None
+                else (terminal_w, reference_rows(ref, n)))
+    level = _ZERO_U if s_level is None else s_level
+
+    def cost(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        H, g, *_ = condense(Aa, Ba, da, xi, _OUT_ROWS, n_c, D, ref, q_eff, r_eff,
+                            np.ascontiguousarray(xi[n:]), level, lateral_rows(n),
+                            output_index(n), W, z_ref)
+        return H, g
+
+    H, g0 = cost(np.zeros(n + N_INPUT))
+    G = np.column_stack([cost(e)[1] - g0 for e in np.eye(n + N_INPUT)])
+    cols = np.flatnonzero(np.tile(np.asarray(enabled, dtype=bool), n_c))
+    full = np.zeros((N_INPUT * n_c, n + N_INPUT))
+    full[cols] = -np.linalg.solve(H[np.ix_(cols, cols)], G[cols])     # scaled increments
+    return -(full[:N_INPUT] * np.asarray(du_max, dtype=float)[:, None])
+
+
 class MpcQp:
     """Builds the MPC QP of each step and solves it with the injected solver; keeps one
     :class:`QpLayout` per (Np, Nc) ever used."""
