@@ -170,6 +170,11 @@ def test_ctrl_c_stops_every_node_cleanly(ros2_env, domain_id, ros, tmp_path):
     assert proc.returncode == 1  # ros2 launch: 0 only for a plant that completed its run
     run = read_run(bag)
     assert run.steps > 100 and (bag / "metadata.yaml").is_file()
+    # realtime starts as lockstep does (issue 41, item 9): step 1 after the answers to step 0
+    assert run.state["stamp_ns"][1] == 10_000_000
+    assert run.mpc_command["stamp_ns"][0] == 0 == run.wheel_torques["stamp_ns"][0]
+    assert run.state["wall_ns"][1] >= max(run.mpc_command["wall_ns"][0],
+                                          run.wheel_torques["wall_ns"][0])
 
 
 @pytest.mark.parametrize(("args", "names"), [

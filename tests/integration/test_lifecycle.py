@@ -34,7 +34,7 @@ from fourws_common.qos import CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from fourws_common.resources import config_dir
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.reference import Reference
-from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState
+from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
 from fourws_sim.core.scenario import load_scenario
 from fourws_sim.core.simulator import Simulator
 
@@ -462,6 +462,14 @@ def test_a_parameter_set_mid_run_applies_from_that_step_and_keeps_the_state(grap
 
 
 # -- realtime -------------------------------------------------------------------------------
+def _assert_started_on_the_answer(run) -> None:
+    """A realtime plant's step 1 was sent after the answers to step 0 (send times)."""
+    assert run.state["stamp_ns"][1] == STEP_NS
+    assert run.mpc_command["stamp_ns"][0] == 0 == run.wheel_torques["stamp_ns"][0]
+    assert run.state["wall_ns"][1] >= max(run.mpc_command["wall_ns"][0],
+                                          run.wheel_torques["wall_ns"][0])
+
+
 def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_path):
     """SIGSTOP the MPC for 2 s of a realtime run: the plant counts late commands and holds
     safe (steer held, torques 0) after command_hold_timeout_s (0.5 s); resumed, the MPC
@@ -489,6 +497,7 @@ def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_p
     assert st["late_commands"] >= 100 and st["safe_hold_steps"] >= 50, st
     run = read_run(tmp_path / "bag")
     assert run.state["stamp_ns"][0] == 0, "the recording missed the start"
+    _assert_started_on_the_answer(run)
     cmd = np.asarray(run.mpc_command["stamp_ns"])
     n_states = run.state["stamp_ns"].size
     # a backlog worked through would answer every state; the newest-state rule skips most of
@@ -496,3 +505,114 @@ def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_p
     assert cmd.size <= n_states - 100, (cmd.size, n_states)
     # resumed, the MPC's next answer is to a state about 2 s later than its last before
     assert (np.diff(cmd) // STEP_NS).max() >= 100, "the MPC worked through the backlog"
+
+
+def test_a_stalled_mpc_takes_the_newest_states_at_once_when_it_resumes(graph, ros):
+    """Issue 41, item 5. The MPC (``sync: latest``, as in realtime) is stopped for 2 s. The
+    first state it handles when it resumes is one stamped before the stall (the transport
+    delivered it so in about half the measured runs; sent here after SIGCONT so that it always
+    is); then come the plant's newest states, 2 s ahead. It must take them at the first
+    confirmation: one rejected (a lone jump may be a stray), the next answered. Before, the
+    old state made the old timeline look alive, so the newest were rejected as strays for 1 s
+    (``TIMELINE_QUIET_NS``): the MPC answered 1 s late, the plant held safe 2.5 s, not 1.5 s.
+    Its state subscription is best effort: a reliable one delivers nothing past a state lost
+    in the stall until the writer re-sends it (with Fast DDS's 3 s heartbeat the MPC answered
+    1.8-2.5 s late)."""
+    from rclpy.qos import ReliabilityPolicy
+
+    preset = config_dir("fourws_bringup") / "controllers" / "improved.yaml"
+    sup = graph([NodeSpec("mpc_node", "fourws_mpc", "mpc_node",
+                          params_files=[str(config_dir("fourws_mpc") / "mpc.yaml"), str(preset)],
+                          parameters={"sync": "latest"})])
+    answered: set[int] = set()
+    ros.node.create_subscription(
+        MpcCommand, "/control/mpc_command",
+        lambda m: answered.add(stamp_to_ns(m.header.stamp) // STEP_NS), CONTROL_QOS)
+    rejected = _rejections(ros)
+    pub_ref = ros.node.create_publisher(ReferenceTrajectory, "/reference/trajectory",
+                                        LATCHED_QOS)
+    pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
+
+    def state_subscriptions() -> list:
+        return [i.qos_profile.reliability for i in
+                ros.node.get_subscriptions_info_by_topic("/vehicle/state")
+                if i.node_name == "mpc_node"]
+
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0
+                          and pub_ref.get_subscription_count() > 0 and state_subscriptions())
+    assert state_subscriptions() == [ReliabilityPolicy.BEST_EFFORT]
+    path = load_scenario("dlc_60_mu05").path
+    pub_ref.publish(ReferenceTrajectory(x=path.x.tolist(), y=path.y.tolist(),
+                                        yaw=path.yaw.tolist(), curvature=path.curvature.tolist(),
+                                        speed=path.speed.tolist()))
+
+    def answer(k: int) -> bool:
+        """Publish the state stamped k until it is answered (a best-effort sample may be lost;
+        a repeat is answered from cache)."""
+        m = VehicleState(x=0.1667 * k, y=0.05, vx=16.667, mu=[0.5] * 4, fz=[1800.0] * 4)
+        m.header.stamp = ns_to_stamp(k * STEP_NS)
+        for _ in range(40):
+            pub.publish(m)
+            if ros.spin_until(lambda: k in answered, 0.5):
+                return True
+        return False
+
+    def futures() -> int:
+        return rejected.get("mpc_node", {}).get("future_stamp", 0)
+
+    assert answer(0), "the MPC never answered"
+    mpc_pid = sup.procs["mpc_node"].popen.pid
+    os.kill(mpc_pid, signal.SIGSTOP)
+    try:
+        time.sleep(2.0)  # the stall itself
+    finally:
+        os.kill(mpc_pid, signal.SIGCONT)
+    assert answer(1)  # stamped before the stall
+    # the plant's newest states, 2 s ahead, one at a time until one is answered; each is
+    # answered or rejected (or lost: the next one follows after 1 s)
+    newest = 201
+    while newest not in answered:
+        assert newest < 251, f"{futures()} newest states rejected, none answered"
+        seen = futures()
+        m = VehicleState(x=0.1667 * newest, y=0.05, vx=16.667, mu=[0.5] * 4, fz=[1800.0] * 4)
+        m.header.stamp = ns_to_stamp(newest * STEP_NS)
+        pub.publish(m)
+        ros.spin_until(lambda n=newest, s=seen: n in answered or futures() > s, 1.0)
+        newest += newest not in answered
+    assert ros.spin_until(lambda: futures() >= 1, 5.0)
+    assert futures() == 1, f"{futures()} newest states rejected before one was answered"
+
+
+def test_a_realtime_plant_holds_its_first_state_until_the_controllers_answer(
+        graph, ros, short_scenario, tmp_path):
+    """Issue 41, item 9: in 1 of 7 realtime launches the plant stepped before the MPC
+    answered (2.6 s of safe hold at the start). A realtime plant now waits for the first
+    state's answer as lockstep waits for every step's: it republishes state 0 and steps
+    only once its MpcCommand and WheelTorques have arrived; with no controller it ends
+    with a timeout (exit 4), as lockstep does. fourws run and ros2 launch start this node."""
+    status = tmp_path / "alone.json"
+    sup = graph([_plant(short_scenario, status, mode="realtime", command_timeout_s=0.5)])
+    assert sup.wait_exit("plant_node", timeout_s=60) == ExitCode.TIMEOUT
+    st = json.loads(status.read_text())
+    assert st["steps"] == 0 and st["exit_code"] == 4, st
+    assert "no /control/mpc_command and /control/wheel_torques for step 0" in st["reason"]
+
+    seen: list[int] = []
+    ros.node.create_subscription(VehicleState, "/vehicle/state",
+                                 lambda m: seen.append(stamp_to_ns(m.header.stamp)), CONTROL_QOS)
+    ros.node.create_subscription(ReferenceTrajectory, "/reference/trajectory", lambda m: None,
+                                 LATCHED_QOS)
+    graph([_plant(short_scenario, tmp_path / "status.json", mode="realtime",
+                  wait_for_subscribers=1, wait_for_reference_subscribers=1,
+                  republish_period_s=0.05)])
+    # a controller slow to come up: nothing answered until state 0 came three times
+    assert ros.spin_until(lambda: len(seen) >= 3, 30.0), "the plant never started"
+    assert set(seen) == {0}, f"the plant stepped unanswered: stamps {sorted(set(seen))[:5]}"
+    pub_cmd = ros.node.create_publisher(MpcCommand, "/control/mpc_command", CONTROL_QOS)
+    pub_tq = ros.node.create_publisher(WheelTorques, "/control/wheel_torques", CONTROL_QOS)
+    assert ros.spin_until(lambda: pub_cmd.get_subscription_count() > 0
+                          and pub_tq.get_subscription_count() > 0)
+    pub_cmd.publish(MpcCommand())              # stamped 0: the answer to state 0
+    pub_tq.publish(WheelTorques(torque=[0.0] * 4))
+    assert ros.spin_until(lambda: max(seen) >= STEP_NS, 20.0), "answered, it did not step"
+    assert sorted(seen) == seen, "stamps went back"

@@ -108,3 +108,23 @@ def test_strays_in_a_row_never_move_a_live_timeline_and_a_restart_is_taken_once_
     plain.check(0)
     plain.check(far)
     assert plain.check(far + 10 * ms) is Stamp.JUMPED
+
+
+def test_after_a_stall_of_the_node_the_newest_states_are_taken_at_the_first_confirmation():
+    """Issue 41, item 5: a node stopped for 2 s first handles a state sent before the stall;
+    the plant's newest states, 2 s ahead, must then be confirmed at once, not rejected for
+    quiet_ns as strays of a live timeline (the MPC answered 1 s late, the hold lasted 2.5 s).
+    A jump back right after the stall still waits for the quiet rule."""
+    ms = 1_000_000
+    gate = StampGate(1000 * ms, quiet_ns=1000 * ms)
+    for k in range(100):                                   # realtime: stamp = arrival
+        assert gate.check(k * 10 * ms, now_ns=k * 10 * ms) in (Stamp.NEW,)
+    # stopped from 1.0 s to 3.0 s; resumed, it handles the state sent at 1.0 s first
+    assert gate.check(100 * 10 * ms, now_ns=3000 * ms) is Stamp.NEW
+    assert gate.check(300 * 10 * ms, now_ns=3001 * ms) is Stamp.FUTURE   # 2 s ahead ...
+    assert gate.check(301 * 10 * ms, now_ns=3010 * ms) is Stamp.JUMPED   # ... confirmed
+    assert gate.check(302 * 10 * ms, now_ns=3020 * ms) is Stamp.NEW
+    # strays right after: a pair from the past is not taken while the plant goes on
+    assert gate.check(0, now_ns=3021 * ms) is Stamp.PAST
+    assert gate.check(10 * ms, now_ns=3022 * ms) is Stamp.PAST
+    assert gate.check(303 * 10 * ms, now_ns=3030 * ms) is Stamp.NEW

@@ -29,8 +29,9 @@ WIRING = ["fourws_sim/fourws_sim/plant_node.py", "fourws_mpc/fourws_mpc/mpc_node
           "fourws_bringup/fourws_bringup/bag/run_data.py",
           "fourws_common/fourws_common/state_input.py",
           "fourws_bringup/fourws_bringup/runner.py", "fourws_bringup/fourws_bringup/report.py"]
-#: the one QoS profile a node names itself: the controllers' subscriber-side keep-last-1
-SUBSCRIBER_SIDE = {"LATEST_QOS"}
+#: the QoS profiles a node names itself: the controllers' subscriber-side keep-last-1
+#: (reliable in lockstep, best effort with ``sync: latest``)
+SUBSCRIBER_SIDE = {"LATEST_QOS", "NEWEST_QOS"}
 
 
 def test_qos_kinds_keep_their_values():
@@ -40,6 +41,7 @@ def test_qos_kinds_keep_their_values():
         "latched": ("keep_last", 1, "reliable", "transient_local"),
         "clock": ("keep_last", 1000, "reliable", "volatile"),
         "latest": ("keep_last", 1, "reliable", "volatile"),
+        "newest": ("keep_last", 1, "best_effort", "volatile"),
         "diagnostics": ("keep_last", 10, "reliable", "volatile"),
     }
     assert all(q.reason for q in QOS_KINDS.values())
@@ -54,7 +56,7 @@ def test_every_graph_topic_is_named_typed_and_offers_a_kind_of_the_table():
     for name, t in TOPICS.items():
         assert t.name == name and name.startswith("/")
         assert re.fullmatch(r"[a-z_]+/msg/[A-Z][A-Za-z]+", t.type), t.type
-        assert t.qos in QOS_KINDS and t.qos != "latest", name  # latest: subscriber side only
+        assert t.qos in QOS_KINDS and t.qos not in ("latest", "newest"), name  # subscriber side
         assert t.reason
         assert offered_qos(name) == QOS_KINDS[t.qos].as_dict() == topic_info(name).qos
 
@@ -96,6 +98,9 @@ def test_rclpy_profiles_are_built_from_the_table_with_the_same_values():
     assert qos.LATCHED_QOS == profile(1, DurabilityPolicy.TRANSIENT_LOCAL)
     assert qos.CLOCK_QOS == profile(1000)
     assert qos.LATEST_QOS == profile(1)
+    assert qos.NEWEST_QOS == QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                                        durability=DurabilityPolicy.VOLATILE)
     assert qos.DIAGNOSTICS_QOS == profile(10)
     for kind, p in qos.PROFILES.items():
         assert qos.dict_from_profile(p) == QOS_KINDS[kind].as_dict()

@@ -14,7 +14,10 @@ A node checks each message at its edge, before any value reaches a core or an in
   confirms — it follows the jumped stamp by 0..``max_jump_ns`` — is a new timeline: the gate
   accepts it and reports ``JUMPED`` so the node can reset its state; in the nodes only once
   the old timeline has been silent for :data:`TIMELINE_QUIET_NS` (strays in a row never move
-  a run off a plant that is still publishing).
+  a run off a plant that is still publishing). A timeline that has just come back from such
+  a silence (the node stalled: the states it handles first were sent before the stall) is
+  no proof of life for a jump *ahead* during the next ``quiet_ns``: the plant's newest
+  states, ahead by the stall, are taken at the first confirmation, not 1 s later.
 """
 
 from __future__ import annotations
@@ -131,7 +134,9 @@ class StampGate:
     only once the current timeline has been silent that long, so a stray source, however
     many messages it sends, never moves a run off a timeline that is still alive (the
     plant republishes its state every 0.25 s even while it waits); a restarted plant's
-    timeline is taken once the old one has stopped."""
+    timeline is taken once the old one has stopped. A jump ahead is confirmed at once
+    within ``quiet_ns`` of the timeline's return from a silence of ``quiet_ns`` (a stalled
+    node: its first states after the stall are old ones)."""
 
     def __init__(self, max_jump_ns: int, quiet_ns: int = 0) -> None:
         if max_jump_ns <= 0:
@@ -141,11 +146,20 @@ class StampGate:
         self.last_ns: int | None = None
         self._pending_ns: int | None = None
         self._seen_ns: int | None = None
+        self._resumed_ns: int | None = None  # when the timeline came back from a silence
 
     def reset(self) -> None:
         self.last_ns = None
         self._pending_ns = None
         self._seen_ns = None
+        self._resumed_ns = None
+
+    def _arrived(self, now_ns: int | None) -> None:
+        """A state of the current timeline arrived at ``now_ns``."""
+        if (self.quiet_ns > 0 and now_ns is not None and self._seen_ns is not None
+                and now_ns - self._seen_ns >= self.quiet_ns):
+            self._resumed_ns = now_ns
+        self._seen_ns = now_ns
 
     @property
     def pending_ns(self) -> int | None:
@@ -160,16 +174,21 @@ class StampGate:
             self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
             return Stamp.NEW
         if stamp_ns == last:
-            self._seen_ns = now_ns
+            self._arrived(now_ns)
             return Stamp.REPEAT
         if 0 < stamp_ns - last <= self.max_jump_ns:
-            self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
+            self.last_ns, self._pending_ns = stamp_ns, None
+            self._arrived(now_ns)
             return Stamp.NEW
         pending = self._pending_ns
         alive = (self.quiet_ns > 0 and now_ns is not None and self._seen_ns is not None
                  and now_ns - self._seen_ns < self.quiet_ns)
+        if (alive and stamp_ns > last and self._resumed_ns is not None
+                and now_ns - self._resumed_ns < self.quiet_ns):
+            alive = False  # just back from a silence: its states are old, not proof of life
         if pending is not None and 0 <= stamp_ns - pending <= self.max_jump_ns and not alive:
-            self.last_ns, self._pending_ns, self._seen_ns = stamp_ns, None, now_ns
+            self.last_ns, self._pending_ns = stamp_ns, None
+            self._seen_ns, self._resumed_ns = now_ns, None
             return Stamp.JUMPED
         self._pending_ns = stamp_ns
         return Stamp.PAST if stamp_ns < last else Stamp.FUTURE

@@ -3,7 +3,11 @@
 Each state goes through, in this order:
 
 1. the ``sync`` mode (:class:`~fourws_common.latest_input.LatestInput`, parameter ``sync`` of
-   :class:`~fourws_common.input_guard.InputConfig`);
+   :class:`~fourws_common.input_guard.InputConfig`), which also sets the subscription's QoS:
+   ``lockstep`` reliable keep-last 1 (``LATEST_QOS``: every state of a step), ``latest`` best
+   effort keep-last 1 (``NEWEST_QOS``): a state lost while the node stalled is not repaired, so
+   it never holds back the newest one (a reliable reader delivers nothing past a lost sample
+   until the writer's next heartbeat re-sends it);
 2. plausibility (:func:`~fourws_common.input_guard.implausible_fields` on the fields the core
    reads): an implausible state is rejected and counted;
 3. a reference must have arrived (else the state is not answered; logged every 5 s). The
@@ -44,7 +48,7 @@ from fourws_common.input_guard import (
     implausible_fields,
 )
 from fourws_common.latest_input import LatestInput
-from fourws_common.qos import LATEST_QOS
+from fourws_common.qos import LATEST_QOS, NEWEST_QOS
 from fourws_common.ros_params import ParamBinding
 from fourws_common.topics import VEHICLE_STATE
 from fourws_msgs.msg import VehicleState
@@ -87,12 +91,24 @@ class StateInput:
         self._match_log = RateLimitedLog(node.get_logger().info, period_s=5.0)
         self.latest = LatestInput(node, health.guard(VEHICLE_STATE.name, self._on_state),
                                   health)
-        self.inputs = ParamBinding(node, InputConfig,
-                                   on_change=lambda c: self.latest.set_sync(c.sync))
-        self.latest.set_sync(self.inputs.config.sync)
-        node.create_subscription(VehicleState, VEHICLE_STATE.ros_name,
-                                 health.guard(VEHICLE_STATE.name, self.latest.offer),
-                                 LATEST_QOS)
+        self._offer = health.guard(VEHICLE_STATE.name, self.latest.offer)
+        self._sub: Any = None
+        self._sub_sync = ""
+        self.inputs = ParamBinding(node, InputConfig, on_change=self._apply_sync)
+        self._apply_sync(self.inputs.config)
+
+    def _apply_sync(self, cfg: InputConfig) -> None:
+        """The ``sync`` mode: dispatch (LatestInput) and the state subscription's QoS
+        (module docstring, step 1); the subscription is made again when the mode changes."""
+        self.latest.set_sync(cfg.sync)
+        if cfg.sync == self._sub_sync:
+            return
+        if self._sub is not None:
+            self._node.destroy_subscription(self._sub)
+        self._sub = self._node.create_subscription(
+            VehicleState, VEHICLE_STATE.ros_name, self._offer,
+            NEWEST_QOS if cfg.sync == "latest" else LATEST_QOS)
+        self._sub_sync = cfg.sync
 
     def reset(self) -> None:
         """Forget the stamps (a new run starts from any stamp) and check the outputs' matches

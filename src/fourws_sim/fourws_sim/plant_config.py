@@ -22,11 +22,12 @@ class PlantNodeConfig:
                                          lo=0.1, hi=100.0, unit="m")
     abort_sideslip_deg: float = param(30.0, "end the run beyond this sideslip",
                                       lo=1.0, hi=90.0, unit="deg")
-    command_timeout_s: float = param(20.0, "lockstep: end the run when a step's commands "
-                                     "do not arrive within this wall time", lo=0.5, hi=600.0,
-                                     unit="s")
-    republish_period_s: float = param(0.25, "lockstep: publish the waiting state again after "
-                                      "this wall time", lo=0.01, hi=10.0, unit="s")
+    command_timeout_s: float = param(20.0, "lockstep (realtime: the first state): end the run "
+                                     "when a step's commands do not arrive within this wall "
+                                     "time", lo=0.5, hi=600.0, unit="s")
+    republish_period_s: float = param(0.25, "lockstep (realtime: the first state): publish the "
+                                      "waiting state again after this wall time", lo=0.01,
+                                      hi=10.0, unit="s")
     wait_for_subscribers: int = param(0, "hold the first state until /vehicle/state has this "
                                       "many subscribers (0: start at once)", lo=0, hi=100)
     wait_for_reference_subscribers: int = param(

@@ -30,7 +30,9 @@ Timing modes:
   counted and warned about (``late_commands``); older than ``command_hold_timeout_s`` the
   plant falls back to a safe hold — steer held at the last valid angles, every wheel torque
   0 (coast) — until fresh commands arrive (``safe_hold_steps``). A tick later than 1.5
-  periods counts as an ``overrun``.
+  periods counts as an ``overrun``. The timer starts once the first state is answered (its
+  MpcCommand and WheelTorques held; the state republished and the wait bounded as in
+  lockstep), so a controller still starting never costs a safe hold.
 
 Both modes hold the first state until ``/vehicle/state`` has ``wait_for_subscribers``
 subscribers (the recorder among them: a bag starts with step 0). Every timer runs on the
@@ -137,6 +139,7 @@ class PlantNode(Node):
         # realtime: stamps (ns) of the held commands, and the honesty counters
         self.cmd_stamp_ns: int | None = None
         self.torque_stamp_ns: int | None = None
+        self._rt_timer = None  # the 10 ms step timer, from the first state's answer on
         self.health = NodeHealth(self)
         self.health.runtime(self._runtime)
         self._reported = (0, 0)   # overruns, late commands at the last runtime report
@@ -280,6 +283,7 @@ class PlantNode(Node):
             if self._valid_cmd(msg):
                 self.steer_cmd = (msg.delta_front, msg.delta_rear)
                 self.cmd_stamp_ns = stamp
+                self._realtime_answered()
             return
         self.pending_cmd = msg
         self._try_step()
@@ -292,6 +296,7 @@ class PlantNode(Node):
             if (t := self._valid_torques(msg)) is not None:
                 self.torque_cmd = t
                 self.torque_stamp_ns = stamp
+                self._realtime_answered()
             return
         self.pending_torque = msg
         self._try_step()
@@ -365,8 +370,13 @@ class PlantNode(Node):
         if cfg.wait_for_subscribers:
             self.get_logger().info("all subscribers present: starting")
         self._publish_state()
-        if cfg.mode == "realtime":
-            self.create_timer(cfg.dt_s, self._realtime_tick, clock=self._steady)
+
+    def _realtime_answered(self) -> None:
+        """Realtime: start the step timer once the first state's commands are both held."""
+        if (self._rt_timer is None and self.started and not self.ended
+                and None not in (self.cmd_stamp_ns, self.torque_stamp_ns)):
+            self._rt_timer = self.create_timer(self.params.config.dt_s, self._realtime_tick,
+                                               clock=self._steady)
 
     def _realtime_tick(self) -> None:
         if self.ended:
@@ -421,12 +431,14 @@ class PlantNode(Node):
         now = time.monotonic()
         if not self.started:
             return
-        if cfg.mode == "realtime":
-            return
+        realtime = cfg.mode == "realtime"
+        if self._rt_timer is not None:
+            return  # realtime and stepping: its timer holds safe when commands stop
         if now - self.last_progress > cfg.command_timeout_s:
-            missing = [name for name, held in ((MPC_COMMAND.name, self.pending_cmd),
-                                               (WHEEL_TORQUES.name, self.pending_torque))
-                       if held is None]
+            missing = [name for name, held in (
+                (MPC_COMMAND.name, self.cmd_stamp_ns if realtime else self.pending_cmd),
+                (WHEEL_TORQUES.name, self.torque_stamp_ns if realtime else self.pending_torque))
+                if held is None]
             self._finish(False, f"no {' and '.join(missing)} for step {self.step_k} within "
                          f"{cfg.command_timeout_s:.1f} s", ExitCode.TIMEOUT)
             return
