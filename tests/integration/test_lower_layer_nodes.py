@@ -41,6 +41,7 @@ def _state(k: int, vx: float, fz, fy, mu) -> VehicleState:
     m = VehicleState()
     m.header.stamp = ns_to_stamp(k * 10_000_000)
     m.x, m.vx = 0.1 * k, vx
+    m.wheel_speed = np.full(4, vx / 0.27)          # rolling: the slip limiter stays out
     m.fz, m.fy, m.mu = (np.asarray(a, dtype=float) for a in (fz, fy, mu))
     return m
 

@@ -137,7 +137,7 @@ def _straight(v, n=3001, length=300.0):
 def test_the_controller_reads_the_measured_road_wheel_angles_only_with_actuator_states():
     v = 60 / 3.6
     ref = _straight(v)
-    base = dict(weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
+    base = dict(weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False)
     for model, differs in (("single_track", False), ("single_track_actuators", True),
                            ("single_track_relaxation", True)):
         cfg = MpcConfig(prediction_model=model, prediction_discretisation="zoh", **base)

@@ -68,7 +68,7 @@ def test_presets_share_one_cost_scaling_and_constraints():
     key but its own tuned Bryson maxima, the MPC cost it does not have and its delay
     predictor (the steering lags without the tyre relaxation: its better margin)."""
     switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
-                "law", "terminal_cost", "prediction_model")
+                "law", "terminal_cost", "prediction_model", "state_bounds")
     shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
     mpc = [_preset(n)[0] for n in PRESETS if n not in ("lqr_ff", "improved_np30")]
     for name in shared:
@@ -77,13 +77,18 @@ def test_presets_share_one_cost_scaling_and_constraints():
     # alone cannot: MpcConfig refuses it)
     for c in mpc:
         assert c.terminal_cost == ("lqr" if c.use_rear_steer else "none"), c.controller
+    # the hard β and r bounds wherever there is rear steer; the front-steer baseline has
+    # none, as lqr_ff (deviation 20: they capped a front-steer car below the friction limit)
+    for c in mpc:
+        assert c.state_bounds == c.use_rear_steer, c.controller
     # beyond the paper: the adaptive presets predict with tyres that saturate at the
     # estimated grip; the conventional baselines keep the linear tyres (docs/limits.md)
     for c in mpc:
         assert c.prediction_model == ("single_track_friction" if c.weights_mode == "fuzzy"
                                       else "single_track_relaxation"), c.controller
     lqr = _preset("lqr_ff")[0]
-    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model"}
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model",
+           "state_bounds"}
     assert lqr.prediction_model == "single_track_actuators"
     for name in set(shared) - own:
         assert getattr(lqr, name) == getattr(mpc[0], name), name
@@ -104,7 +109,7 @@ def test_presets_share_one_cost_scaling_and_constraints():
 @pytest.mark.parametrize("key,value", [
     ("rho", -1.0), ("scale_y_m", 0.0), ("weights_mode", "neural"), ("np_baseline", 2.5),
     ("use_dyc", "yes"), ("max_dsteer_front_deg", 0.0), ("apcha_lambda", 1.0),
-    ("apcha_nc_base", "x"), ("osqp_max_iter", 1),
+    ("apcha_nc_base", "x"), ("qp_max_iter", 1),
 ])
 def test_bad_parameter_raises_naming_it(key, value):
     with pytest.raises(ValueError, match=key):

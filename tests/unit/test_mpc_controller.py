@@ -24,7 +24,7 @@ def _straight(n=3001, length=300.0, v=V):
 def _cfg(**kw):
     """The paper's MPC (eq. (1)-(4), forward Euler): the plant here is eq. (1) itself."""
     base = dict(weights_mode="fixed", horizons_mode="fixed", use_dyc=False,
-                osqp_prebuild=False, prediction_model="single_track",
+                qp_prebuild=False, prediction_model="single_track",
                 prediction_discretisation="euler")
     base.update(kw)
     return MpcConfig(**base)
@@ -154,7 +154,7 @@ def test_a_failed_solve_falls_back_to_the_previous_plan_without_nan(solver, text
     ref = _straight()
     assert not ctrl.step(0.0, VehicleSample(0.0, 0.05, 0.0, V, 0.0, 0.0), ref, mu=1.0).fallback
     plan = ctrl.plan_u.copy()
-    ctrl.update_config(dataclasses.replace(ctrl.cfg, osqp_max_iter=1, osqp_check_termination=1))
+    ctrl.update_config(dataclasses.replace(ctrl.cfg, qp_max_iter=1, osqp_check_termination=1))
     r = ctrl.step(0.01, VehicleSample(0.15, 0.3, 0.0, V, 0.0, 0.1), ref, mu=1.0)
     assert r.fallback and text in r.solver_status
     assert r.delta_front == pytest.approx(plan[1, 0])      # the previous plan, shifted
@@ -180,7 +180,7 @@ def test_reset_forgets_the_past():
 
 
 def test_prebuild_creates_every_reachable_instance():
-    cfg = MpcConfig(osqp_prebuild=True)
+    cfg = MpcConfig(qp_prebuild=True)
     ctrl = MpcController(cfg)
     assert set(ctrl.qp.instances) == set(cfg.horizon_pairs())
     assert (12, 6) in ctrl.qp.instances and (30, 10) in ctrl.qp.instances
@@ -224,7 +224,7 @@ def _answers(ctrl, states, ref, change_at=None, change=None):
 def test_a_reset_controller_answers_exactly_as_a_new_one():
     """A second run against the same controller (reset at its start) equals a fresh run bit
     for bit: the OSQP instances' adapted ρ and duals are forgotten too."""
-    cfg = _cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True, osqp_prebuild=True)
+    cfg = _cfg(weights_mode="fuzzy", horizons_mode="apcha", use_dyc=True, qp_prebuild=True)
     states, ref = _states(), _straight()
     ctrl = MpcController(cfg)
     first = _answers(ctrl, states, ref)

@@ -42,7 +42,7 @@ def test_schedule_takes_sent_commands_and_holds_the_last_for_a_shorter_delay():
 
 
 def _cfg(**kw):
-    base = dict(weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False,
+    base = dict(weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False,
                 scale_y_m=0.02, np_baseline=20, nc_baseline=6)
     base.update(kw)
     return MpcConfig(**base)

@@ -89,7 +89,7 @@ def test_lqr_ff_respects_the_steering_actuator_limits():
     from fourws_mpc.core.laws import make_controller
 
     cfg = MpcConfig(law="lqr_ff", controller="lqr_ff", use_rear_steer=False, use_dyc=False,
-                    weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
+                    weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False)
     ctrl = make_controller(cfg)
     x = np.linspace(0, 300, 3001)
     ref = cfg.reference(x, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),

@@ -160,7 +160,7 @@ def _sample(k, steer=0.0):
 
 
 def test_the_controller_commits_the_observers_memory_only_with_a_step():
-    cfg = MpcConfig(weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
+    cfg = MpcConfig(weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False)
     assert cfg.prediction_model == "single_track_relaxation"
     ctrl = MpcController(cfg)
     ref = _straight()
@@ -184,7 +184,7 @@ def test_the_controller_commits_the_observers_memory_only_with_a_step():
 
 
 def test_a_reset_controller_answers_as_a_new_one():
-    cfg = MpcConfig(weights_mode="fixed", horizons_mode="fixed", osqp_prebuild=False)
+    cfg = MpcConfig(weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False)
     ref = _straight()
     a = MpcController(cfg)
     for k in range(5):

@@ -171,7 +171,7 @@ def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> 
 
 def _controller(cfg: MpcConfig) -> MpcController:
     """The MPC whose gain the loop closes (no QP instances built ahead: only its cost)."""
-    return MpcController(dataclasses.replace(cfg, osqp_prebuild=False))
+    return MpcController(dataclasses.replace(cfg, qp_prebuild=False))
 
 
 def model_matrices(cfg: MpcConfig, vx: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

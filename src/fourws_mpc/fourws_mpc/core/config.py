@@ -218,14 +218,15 @@ class MpcConfig:
                            choices=tuple(QP_SOLVERS))
     osqp_eps_abs: float = param(1e-4, "OSQP absolute tolerance", lo=1e-10, hi=1.0)
     osqp_eps_rel: float = param(1e-4, "OSQP relative tolerance", lo=1e-10, hi=1.0)
-    osqp_max_iter: int = param(4000, "iteration limit of the QP solver (OSQP: ADMM "
-                               "iterations; DAQP: active-set changes)", lo=10, hi=1000000)
+    qp_max_iter: int = param(4000, "iteration limit of the QP solver (OSQP: ADMM "
+                             "iterations; DAQP: active-set changes)", lo=10, hi=1000000)
     osqp_polishing: bool = param(False, "OSQP solution polishing")
     osqp_check_termination: int = param(5, "OSQP checks convergence every this many "
                                         "iterations", lo=1, hi=1000)
     osqp_accept_inaccurate: bool = param(False, "trust OSQP status 'solved inaccurate'")
-    osqp_prebuild: bool = param(True, "set up the OSQP instance of every reachable (N_p, N_c) "
-                                "at start-up (no set-up cost inside the control loop)")
+    qp_prebuild: bool = param(True, "set up the solver's instance of every reachable "
+                              "(N_p, N_c) at start-up (no set-up cost inside the control "
+                              "loop)")
     ref_search_back: int = param(SEARCH_BACK, "nearest-point window behind the last index", lo=1,
                                  hi=1000000, unit="samples")
     ref_search_ahead: int = param(SEARCH_AHEAD, "nearest-point window ahead of the last "

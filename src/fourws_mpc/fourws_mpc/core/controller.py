@@ -235,7 +235,7 @@ class MpcController:
     @staticmethod
     def _qp_settings(c: MpcConfig) -> QpSettings:
         return QpSettings(eps_abs=c.osqp_eps_abs, eps_rel=c.osqp_eps_rel,
-                          max_iter=c.osqp_max_iter, polishing=c.osqp_polishing,
+                          max_iter=c.qp_max_iter, polishing=c.osqp_polishing,
                           accept_inaccurate=c.osqp_accept_inaccurate,
                           check_termination=c.osqp_check_termination)
 
@@ -247,7 +247,7 @@ class MpcController:
             solver.reset()
         qp = MpcQp(settings, solver if solver is not None else
                    make_qp_solver(c.qp_solver, settings))
-        if c.osqp_prebuild:
+        if c.qp_prebuild:
             for n_p, n_c in c.horizon_pairs():
                 qp.instance(n_p, n_c)
         return qp
@@ -270,7 +270,7 @@ class MpcController:
         settings = self._qp_settings(c)
         if old is None or settings != self.qp.settings or c.qp_solver != old.qp_solver:
             self.qp = self._new_qp(c, settings)
-        elif c.osqp_prebuild:
+        elif c.qp_prebuild:
             for n_p, n_c in c.horizon_pairs():
                 self.qp.instance(n_p, n_c)
         self._du_max = c.du_max
