@@ -21,9 +21,9 @@ from rclpy.duration import Duration
 from sensor_msgs.msg import Imu, JointState
 
 from fourws_bringup.bag.run_data import read_run
-from fourws_bringup.cli import run_and_score
 from fourws_bringup.core.conditions import load_condition
 from fourws_bringup.supervisor import NodeSpec
+from fourws_bringup.workflow import run_and_score
 from fourws_common.conversions import ns_to_stamp, stamp_to_ns
 from fourws_common.qos import CONTROL_QOS, DIAGNOSTICS_QOS
 from fourws_common.resources import config_dir

@@ -27,11 +27,11 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile
 
 from fourws_bringup.bag.run_data import read_run
-from fourws_bringup.cli import run_and_score
 from fourws_bringup.core.closed_loop import run_closed_loop
 from fourws_bringup.paper import rank
 from fourws_bringup.scoring import bag_metrics, tracking_metrics
 from fourws_bringup.supervisor import NodeSpec
+from fourws_bringup.workflow import run_and_score
 from fourws_common.conversions import stamp_to_ns
 from fourws_common.qos import CONTROL_QOS
 from fourws_common.resources import config_dir

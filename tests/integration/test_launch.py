@@ -199,7 +199,7 @@ def test_a_bad_argument_ends_the_launch_with_a_clear_error(ros2_env, domain_id, 
 @pytest.mark.parametrize("file", ["fourws.launch.py", "controllers.launch.py"])
 def test_show_args_names_every_preset_and_where_the_clock_goes(ros2_env, domain_id, file):
     """Issue 41, item 9: ``--show-args`` omitted improved_np30 and said /clock stays global,
-    where a namespaced simulation moves it (runner.clock_remap)."""
+    where a namespaced simulation moves it (graph.clock_remap)."""
     from fourws_bringup.core.configs import list_controllers
 
     proc = _launch(ros2_env, domain_id, file, "--show-args")

@@ -46,7 +46,7 @@ def test_two_graphs_in_two_namespaces_of_one_domain(domain_id, tmp_path):
         other = next(n for n in RUNS if n != ns)
         assert f"/{ns}/vehicle/state" in names and f"/{ns}/control/mpc_command" in names
         assert not any(n.startswith(f"/{other}/") for n in names), names
-        # each simulated car has its own clock (runner.clock_remap); /diagnostics is global
+        # each simulated car has its own clock (graph.clock_remap); /diagnostics is global
         assert f"/{ns}/clock" in names and "/clock" not in names and "/diagnostics" in names
         # ... but a car's bag holds its own nodes' diagnostics only (issue 41, item 10)
         with McapBag(tmp_path / ns / "bag") as bag:

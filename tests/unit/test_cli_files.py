@@ -28,10 +28,10 @@ from std_msgs.msg import String  # noqa: E402
 from fourws_bringup import cli  # noqa: E402
 from fourws_bringup.bag.run_data import read_run  # noqa: E402
 from fourws_bringup.bag.writer import BagWriter  # noqa: E402
-from fourws_bringup.cli import report_path  # noqa: E402
+from fourws_bringup.outputs import RunError, prepare_out_dir  # noqa: E402
 from fourws_bringup.paper import paper_folder_problem  # noqa: E402
-from fourws_bringup.runner import RunError, prepare_out_dir  # noqa: E402
 from fourws_bringup.scoring import strict_metrics  # noqa: E402
+from fourws_bringup.workflow import report_path  # noqa: E402
 from fourws_common.conversions import ns_to_stamp  # noqa: E402
 from fourws_common.topics import DEFAULT_TOPICS, topic_info  # noqa: E402
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState  # noqa: E402

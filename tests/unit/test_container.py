@@ -45,7 +45,7 @@ def test_parameter_files_whose_orders_contradict_cannot_be_composed():
 def test_a_composed_node_gets_the_preset_over_its_package_defaults(tmp_path):
     """The real files: mpc_4ws's preset sets the allocator's method to 'equal' over
     allocator.yaml's 'optimal'; the container must be given them in that order too."""
-    from fourws_bringup.runner import graph_specs
+    from fourws_bringup.graph import graph_specs
 
     for layout in ("control", "all"):
         (box,) = [s for s in graph_specs("dlc_60_mu05", "mpc_4ws", None, compose=layout)
@@ -110,7 +110,7 @@ def test_every_hostable_node_is_the_class_its_own_executable_runs():
     ("all", {"node_container", "recorder_node"}),
 ])
 def test_every_layout_hosts_every_node_once_and_the_recorder_alone(tmp_path, layout, processes):
-    from fourws_bringup.runner import graph_specs
+    from fourws_bringup.graph import graph_specs
 
     specs = graph_specs("dlc_60_mu05", "improved", tmp_path / "bag", compose=layout)
     assert {s.name for s in specs} == processes
@@ -129,7 +129,8 @@ def test_every_layout_hosts_every_node_once_and_the_recorder_alone(tmp_path, lay
 
 
 def test_an_unknown_layout_is_a_clear_error(tmp_path):
-    from fourws_bringup.runner import RunError, graph_specs
+    from fourws_bringup.graph import graph_specs
+    from fourws_bringup.outputs import RunError
 
     with pytest.raises(RunError, match="'some'"):
         graph_specs("dlc_60_mu05", "improved", None, compose="some")

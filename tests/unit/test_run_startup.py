@@ -9,7 +9,7 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from fourws_bringup.runner import graph_specs
+from fourws_bringup.graph import graph_specs
 from fourws_bringup.supervisor import (
     DDS_PROFILES_ENV,
     DDS_PROFILES_FILE,

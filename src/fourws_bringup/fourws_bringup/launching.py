@@ -1,6 +1,6 @@
 """Launch descriptions of fourws (``ros2 launch fourws_bringup fourws.launch.py``), built from
-the node table of ``fourws run`` (:func:`fourws_bringup.runner.graph_specs` and
-:func:`~fourws_bringup.runner.control_specs`), so the two cannot drift: the same nodes,
+the node table of ``fourws run`` (:func:`fourws_bringup.graph.graph_specs` and
+:func:`~fourws_bringup.graph.control_specs`), so the two cannot drift: the same nodes,
 parameter files, parameters, namespaces and process layouts.
 
 Each :class:`~fourws_bringup.supervisor.NodeSpec` becomes one ``launch_ros.actions.Node``
@@ -40,7 +40,8 @@ from fourws_common.vehicle_info import list_vehicles
 
 from .core.conditions import IDEAL, load_condition
 from .core.configs import list_controllers
-from .runner import COMPOSE_LAYOUTS, RunError, control_specs, graph_specs
+from .graph import COMPOSE_LAYOUTS, control_specs, graph_specs
+from .outputs import RunError
 from .supervisor import NodeSpec, dds_environment
 
 TRUE, FALSE = ("true", "1", "yes", "on"), ("false", "0", "no", "off")

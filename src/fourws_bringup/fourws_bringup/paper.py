@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import run_and_score
-from .runner import prepare_out_dir, run_folder_problem
+from .outputs import prepare_out_dir, run_folder_problem
 from .scoring import run_failure
+from .workflow import run_and_score
 
 # Paper, Tables 6-8: (max |eY| m, RMSE eY m, MAE eY m, max |eφ| deg, RMSE eφ deg)
 PAPER_T6 = {
@@ -325,7 +325,7 @@ PAPER_FOLDER_ENTRIES = ("report.md", "figures")
 def paper_folder_problem(folder: Path) -> str | None:
     """Why ``folder`` is not the output of ``fourws paper``, or None if it is: it holds only
     report.md, figures/ and run folders named ``CONTROLLER@SCENARIO``
-    (:func:`fourws_bringup.runner.run_folder_problem`), at least one of them."""
+    (:func:`fourws_bringup.outputs.run_folder_problem`), at least one of them."""
     entries = sorted(folder.iterdir())
     other = [p.name for p in entries if p.name not in PAPER_FOLDER_ENTRIES
              and not (p.is_dir() and "@" in p.name)]

@@ -29,7 +29,8 @@ from fourws_mpc.core.reference import Reference
 from .bag.errors import BagError
 from .bag.run_data import RunData, read_run
 from .core.metrics import reference_from_arrays, run_metrics
-from .runner import RunOutcome, output_error
+from .outputs import output_error
+from .runner import RunOutcome
 
 #: a step whose MPC solve took longer than the control period missed its deadline
 DEADLINE_MS = 10.0
@@ -96,7 +97,7 @@ def metrics_json(metrics: Mapping) -> str:
 def write_metrics(folder: Path, metrics: Mapping) -> Path:
     """Write ``folder/metrics.json`` (:func:`metrics_json`) whole or not at all (a temporary
     file renamed); a ``RunError`` if it cannot, an ``OutputError`` (exit 1) when the disk is
-    full (``runner.output_error``)."""
+    full (``outputs.output_error``)."""
     path = folder / "metrics.json"
     tmp = folder / ".metrics.json.tmp"
     try:

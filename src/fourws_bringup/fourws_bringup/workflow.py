@@ -1,0 +1,122 @@
+"""A run and its score: ``fourws run`` (the graph over topics, then metrics.json and figures
+from its bag) and ``fourws report`` (the same from a bag alone); ``fourws paper`` runs the
+former for each of its configurations (docs/architecture.md, "Running").
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from .core.conditions import IDEAL, Condition
+
+
+def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool = False,
+                  mode: str = "lockstep", plots: bool = True, progress: bool = True,
+                  compose: str = "none", condition: Condition = IDEAL,
+                  namespace: str = "", domain_id: int | None = None,
+                  via_adapter: bool = False) -> dict:
+    """``fourws run``: one run over topics, then metrics.json and plots from its bag.
+
+    ``compose``: the process layout (:func:`fourws_bringup.graph.graph_specs`), recorded in
+    metrics.json; it changes the timing only, never a recorded value. ``condition``: the
+    bench (``core.conditions``), recorded in metrics.json as ``condition`` and ``seed``.
+    ``namespace``, ``domain_id``, ``via_adapter``: :func:`~fourws_bringup.runner.run_graph`.
+    """
+    from fourws_common.exit_codes import ExitCode
+    from fourws_common.vehicle_info import load_vehicle_info
+    from fourws_sim.core.scenario import load_scenario
+
+    from .core.configs import check_preset
+    from .graph import controller_preset
+    from .outputs import RunError, prepare_out_dir
+    from .runner import run_graph
+    from .scoring import (
+        limit_record,
+        scenario_record,
+        score_run,
+        vehicle_record,
+        write_metrics,
+    )
+
+    controller_preset(controller)
+    try:
+        check_preset(controller)
+    except ValueError as exc:
+        why = str(exc).removeprefix(f"{Path(controller)}: ")   # the file is named once
+        raise RunError(f"controller preset '{controller}': {why}") from None
+    try:
+        load_vehicle_info(condition.vehicle or None)   # the controllers' part of the car
+    except ValueError as exc:
+        raise RunError(f"vehicle: {exc}") from None
+    try:
+        sc = load_scenario(scenario, vehicle=condition.vehicle or None)  # the plant's part
+    except (ValueError, FileNotFoundError) as exc:
+        why = str(exc).removeprefix(f"{Path(scenario)}: ")  # the file is named once
+        raise RunError(f"scenario '{scenario}': {why}") from exc
+    prepare_out_dir(out_dir, force)
+    print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
+    outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
+                        compose=compose, condition=condition, namespace=namespace,
+                        domain_id=domain_id, via_adapter=via_adapter)
+    from .bag.run_data import read_run
+
+    run = None
+    try:
+        run = read_run(out_dir)  # once, for the metrics and the figures
+        metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller, run=run)
+        metrics.update(limit_record(run, metrics, sc.path.lanes))
+    except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
+        metrics = {"scenario": sc.name, "controller": controller, "completed": False,
+                   "reason": f"{outcome.reason}; metrics failed: {exc}",
+                   "wall_time_s": outcome.wall_time_s, "exit_code": int(ExitCode.ERROR)}
+        if outcome.died:
+            metrics["died"] = outcome.died
+            metrics["died_error"] = outcome.died_error
+    metrics.update(scenario_record(sc))
+    metrics.update(vehicle_record(condition.vehicle))
+    metrics["compose"] = compose
+    if namespace.strip("/"):
+        metrics["namespace"] = "/" + namespace.strip("/")
+    if via_adapter:
+        metrics["via_adapter"] = True
+    metrics["condition"] = condition.name
+    metrics["seed"] = condition.seed
+    try:
+        write_metrics(out_dir, metrics)
+    except RunError as exc:
+        exc.metrics = metrics            # still printed: nothing the run measured is lost
+        if (out_dir / "bag").is_dir():
+            exc.args = (f"{exc}; the bag keeps the run up to the failure (`fourws bag "
+                        f"recover {out_dir}` once there is space)",)
+        raise
+    if plots and (out_dir / "bag").exists():
+        try:
+            from .report import draw_figures  # matplotlib: only when figures are drawn
+
+            draw_figures(run if run is not None else read_run(out_dir), out_dir / "plots",
+                         workers=min(2, os.cpu_count() or 1))
+        except Exception as exc:  # noqa: BLE001
+            print(f"[fourws] figures failed: {exc}", file=sys.stderr)
+    return metrics
+
+
+def report_path(path: Path, out: Path | None = None) -> dict:
+    """``fourws report``: metrics.json and figures recomputed from a bag or run folder.
+
+    A ``RunError`` (before the bag is read) when ``out`` cannot be written.
+    """
+    from .bag.run_data import read_run
+    from .outputs import writable_dir
+    from .report import draw_figures
+    from .scoring import score_run, write_metrics
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag or run folder")
+    out = out or (path if (path / "bag").is_dir() else path.parent)
+    writable_dir(out)
+    metrics = score_run(path)
+    write_metrics(out, metrics)
+    draw_figures(read_run(path), out / "plots")
+    return metrics
