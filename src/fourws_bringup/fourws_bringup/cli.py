@@ -122,6 +122,7 @@ def _cmd_margins(args: argparse.Namespace) -> int:
 
     from fourws_sim.core.scenario import load_scenario
 
+    from .core.conditions import condition_from_mapping
     from .core.configs import load_mpc_config
     from .core.margins import margins
 
@@ -137,8 +138,10 @@ def _cmd_margins(args: argparse.Namespace) -> int:
         vx = args.speed_kmh / 3.6 if args.speed_kmh is not None else sc.speed_mps
         if not 1.0 <= vx <= 70.0:
             raise ValueError(f"--speed-kmh: {vx * 3.6:g} km/h outside 3.6..252")
-        m = margins(cfg, sc.vehicle, vx, delay_periods=args.delay_periods,
-                    steer_dead_time_s=args.steer_dead_time_ms * 1e-3,
+        plant = condition_from_mapping({"delay_periods": args.delay_periods,
+                                        "steer_dead_time_ms": args.steer_dead_time_ms})
+        m = margins(cfg, sc.vehicle, vx, delay_periods=plant.delay_periods,
+                    steer_dead_time_s=plant.steer_dead_time_s,
                     relaxation=not args.no_relaxation)
     except (ValueError, FileNotFoundError) as exc:
         print(f"fourws margins: {exc}", file=sys.stderr)
