@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """Paired comparison of controllers over seeds, from a ``fourws sweep`` results.csv.
 
-    python tools/compare_seeds.py runs/lqr-comparison/results.csv --reference lqr_ff
+    python studies/compare_seeds.py runs/lqr-comparison/results.csv --reference lqr_ff
         [--metric max_abs_lateral_error_m] [--condition all]
-    python tools/compare_seeds.py RESULTS --between all_ekf all_ekf_retuned
-    python tools/compare_seeds.py RESULTS --condition sY_x4 --reference lqr_ff \
+    python studies/compare_seeds.py RESULTS --between all_ekf all_ekf_retuned
+    python studies/compare_seeds.py RESULTS --condition sY_x4 --reference lqr_ff \
         --reference-condition all
 
 For every scenario and every other controller: the median and worst of the metric, and,

@@ -7,7 +7,7 @@ except the timing ones (wall time, real-time factor, start-up wait, step latenci
 times and what depends on them), the table rows and ranking lines of report.md, and every
 per-step message of the bags (states, MPC commands, drive commands, wheel torques, decoded
 with mcap-ros2-support) for equality. Used to show that a refactor changed no recorded value
-(docs/lab-notes.md, 2026-12-02).
+(studies/lab-notes/README.md, 2026-12-02).
 """
 
 from __future__ import annotations

@@ -61,8 +61,9 @@ def main() -> int:
              "is the sensor's error, which no controller that holds what it measures can "
              "remove; a low correlation means the controller filters the noise and adds an "
              "error of its own. Over five seeds a correlation is a weak estimate "
-             "(`benchmarks/lqr_comparison.yaml` has 60). With white noise the 'floor' is only "
-             "a scale: the controllers filter it, and the ratio says how much they pass.\n\n"
+             "(`studies/lqr_comparison/lqr_comparison.yaml` has 60). With white noise the "
+             "'floor' is only a scale: the controllers filter it, and the ratio says how much "
+             "they pass.\n\n"
              + spec_section(Path(args.out) / "results.csv", spec))
     (ROOT / "docs" / "benchmark.md").write_text(head + summary.split("\n", 2)[-1] + floor,
                                                encoding="utf-8")

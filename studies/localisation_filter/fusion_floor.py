@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Could a localisation filter take the controllers under the localisation floor?
 
-    python tools/fusion_floor.py [--noise realistic] [--speeds-kmh 60 90] [--seeds 60]
+    python studies/localisation_filter/fusion_floor.py [--noise realistic]
+        [--speeds-kmh 60 90] [--seeds 60]
         [--steps 4043] [--warmup-s 30] [--no-velocity-noise] [--gyro-bias-sigma 0.0]
         [--gyro-bias-tau-s 100]
 

@@ -1,4 +1,4 @@
-"""tools/compare_seeds.py: the paired seed comparison of two controllers."""
+"""studies/compare_seeds.py: the paired seed comparison of two controllers."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 spec = importlib.util.spec_from_file_location("compare_seeds",
-                                              ROOT / "tools" / "compare_seeds.py")
+                                              ROOT / "studies" / "compare_seeds.py")
 cs = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(cs)
 

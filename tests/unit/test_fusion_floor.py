@@ -1,4 +1,5 @@
-"""tools/fusion_floor.py: what a localisation filter could make of the bench's fixes."""
+"""studies/localisation_filter/fusion_floor.py: what a localisation filter could make of the
+bench's fixes."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from plant_helpers import plant_output
 from fourws_sim.core.sensing import NoiseSpec, Sensors
 
 ROOT = Path(__file__).resolve().parents[2]
-spec = importlib.util.spec_from_file_location("fusion_floor", ROOT / "tools" / "fusion_floor.py")
+spec = importlib.util.spec_from_file_location(
+    "fusion_floor", ROOT / "studies" / "localisation_filter" / "fusion_floor.py")
 ff = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(ff)
 

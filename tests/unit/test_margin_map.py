@@ -1,4 +1,5 @@
-"""tools/margin_map.py: the tuning grid's margins, on the very loops `fourws tune` keeps by."""
+"""studies/margin_map/margin_map.py: the tuning grid's margins, on the very loops `fourws tune`
+keeps by."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from fourws_bringup import tuning
 from fourws_bringup.core.margins import margins
 
 ROOT = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("margin_map", ROOT / "tools" / "margin_map.py")
+_spec = importlib.util.spec_from_file_location("margin_map",
+                                               ROOT / "studies" / "margin_map" / "margin_map.py")
 mm = importlib.util.module_from_spec(_spec)
 sys.modules["margin_map"] = mm          # its dataclass looks itself up there
 _spec.loader.exec_module(mm)

@@ -28,8 +28,8 @@ DT = 0.01
 
 
 def _fusion_floor():
-    spec = importlib.util.spec_from_file_location("fusion_floor",
-                                                  ROOT / "tools" / "fusion_floor.py")
+    spec = importlib.util.spec_from_file_location(
+        "fusion_floor", ROOT / "studies" / "localisation_filter" / "fusion_floor.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -54,7 +54,8 @@ def _straight(noise, seed: int, steps: int, v: float):
 
 
 def test_on_a_straight_the_filter_is_the_linear_kalman_filter_of_fusion_floor():
-    """tools/fusion_floor.py's Kalman filter is an independent, linearised formulation (state
+    """studies/localisation_filter/fusion_floor.py's Kalman filter is an independent,
+    linearised formulation (state
     [y, ψ, b_y, b_ψ, b_vy], the straight-path model y' = v ψ + v_y, Euler with the start of
     the period's odometry): on the same error streams the EKF's lateral estimate follows it
     to about a millimetre (the two integrate the white odometry errors by different rules)
@@ -136,7 +137,8 @@ def test_on_the_bench_streams_the_filter_beats_the_raw_fix_where_the_odometry_ca
     """The gyro (0.002 rad/s white) holds the heading far better than the 0.1° fix, and
     the v_y error becomes a state; the position gains less (RMS 0.83-0.90 of the raw fix's
     on seeds 0-2), because dead reckoning drifts
-    with the v_y error (tools/fusion_floor.py). Measured after two correlation times."""
+    with the v_y error (studies/localisation_filter/fusion_floor.py). Measured after two
+    correlation times."""
     noise = _realistic_noise()
     for seed in (0, 1, 2):
         f, est, raw = _straight(noise, seed, 3000, 60.0 / 3.6)

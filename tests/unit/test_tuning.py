@@ -1,7 +1,6 @@
 """fourws tune: the one tuning procedure, its spec, its preset blocks, and that rerunning it
 reproduces the shipped presets."""
 
-import dataclasses
 from pathlib import Path
 
 import pytest
@@ -11,10 +10,6 @@ from fourws_bringup.core.configs import load_mpc_config, node_values
 
 ROOT = Path(__file__).resolve().parents[2]
 SPEC = ROOT / "benchmarks" / "tuning.yaml"
-# studies that tune their own presets by the shipped procedure (each spec says so)
-STUDIES = {name: ROOT / "benchmarks" / name / "tuning.yaml"
-           for name in ("horizon_study", "own_scaling_study", "terminal_cost_study",
-                       "terminal_cost_study/adoption")}
 
 
 def test_the_spec_is_disjoint_from_what_is_reported():
@@ -69,21 +64,6 @@ def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
         tuning.replace_block("allocator_node: {}\n", [])
 
 
-@pytest.mark.parametrize("study_path", STUDIES.values(), ids=STUDIES.keys())
-def test_a_study_tunes_by_the_shipped_procedure(study_path):
-    """A study's tuning spec says it is the shipped spec with other groups: the same grid,
-    margin constraint, scenarios, seeds and conditions. The grid may be the shipped grid of
-    the study's day: it was widened by one soft step (exponent 6) for every group when the
-    4WS presets adopted the terminal cost (2026-12-04), so an older study's grid is a subset
-    (the older studies ran on the grid without 6)."""
-    study = tuning.load_tuning_spec(study_path)
-    shipped = tuning.load_tuning_spec(SPEC)
-    assert set(study.grid_exponents) <= set(shipped.grid_exponents)
-    assert dataclasses.replace(study, groups=shipped.groups,
-                               grid_exponents=shipped.grid_exponents) == shipped
-    assert {g.name for g in study.groups}.isdisjoint(g.name for g in shipped.groups)
-
-
 def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
     """A study's presets live beside its spec, not among the package's: the spec names the
     file (relative to itself), ``write_presets`` writes that file and no other."""
@@ -111,12 +91,10 @@ def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
     assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == []
 
 
-@pytest.mark.parametrize("spec_path", [SPEC, *STUDIES.values()],
-                         ids=["shipped", *STUDIES.keys()])
+@pytest.mark.parametrize("spec_path", [SPEC], ids=["shipped"])
 def test_the_presets_carry_the_chosen_values_and_satisfy_the_margin(spec_path):
     """What the presets load is what their tuned block says, and the chosen candidate meets
-    the procedure's own constraint (the full rerun of the shipped spec is the next test; the
-    studies' presets, which live beside their specs, are held to the same)."""
+    the procedure's own constraint (the full rerun of the shipped spec is the next test)."""
     spec = tuning.load_tuning_spec(spec_path)
     for g in spec.groups:
         vals = {}
