@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fourws_bringup.paper import T67_KEYS, TABLES, _world_condition, rank, tie_groups
+from fourws_bringup.paper import T67_KEYS, TABLES, paper_condition, rank, tie_groups
 
 #: world of ``fourws paper`` -> the sweep condition that runs it in the bench
 WORLDS = {"ideal": "ideal", "realistic": "all"}
@@ -67,7 +67,7 @@ def margin_text(controller: str, scenario: str, world: str) -> str:
     from fourws_bringup.core.margins import margins
     from fourws_sim.core.scenario import load_scenario
 
-    cond = _world_condition(world)
+    cond = paper_condition(world)
     sc = load_scenario(scenario)
     m = margins(load_mpc_config(controller, node_parameters(cond)["mpc_node"]), sc.vehicle,
                 sc.speed_mps, delay_periods=cond.delay_periods,

@@ -14,12 +14,12 @@ import pytest
 
 from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.core.configs import load_allocator_config, load_mpc_config
-from fourws_bringup.paper import PAPER_RUNS, WORLDS, allocation_note, run_dir_name
+from fourws_bringup.paper import CONDITIONS, PAPER_RUNS, allocation_note, run_dir_name
 from fourws_bringup.report import allocation_audit
 from fourws_bringup.scoring import bag_metrics
 
 BAGS = Path(__file__).resolve().parents[2] / "bags"
-NAMES = [run_dir_name(c, s, w) for w in WORLDS for c, s in PAPER_RUNS]
+NAMES = [run_dir_name(c, s, w) for w in CONDITIONS for c, s in PAPER_RUNS]
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
         "max_abs_heading_error_deg", "rmse_heading_error_deg", "max_abs_sideslip_deg",
         "rmse_sideslip_deg")

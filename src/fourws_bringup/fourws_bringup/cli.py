@@ -3,7 +3,7 @@
     fourws run --scenario NAME_OR_YAML --controller NAME --out DIR [--force] [--mode M]
                [--no-plots] [--compose {none,control,all}]
     fourws paper [--out DIR] [--force] [--only C@S ...] [--compose {none,control,all}]
-                 [--worlds ideal realistic] [--seed N]
+                 [--conditions ideal realistic] [--seed N]
     fourws report BAG_OR_RUN [--out DIR]
     fourws replay BAG [--rate R] [--topics T ...] [--domain-id N]
     fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
@@ -61,7 +61,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
     try:
         return run_paper(Path(args.out), force=args.force, only=args.only,
-                         compose=args.compose, worlds=tuple(args.worlds), seed=args.seed)
+                         compose=args.compose, conditions=tuple(args.conditions), seed=args.seed)
     except RunError as exc:
         print(f"fourws paper: {exc}", file=sys.stderr)
         return 2
@@ -223,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing output folder")
     p.add_argument("--only", nargs="*", help="subset of runs, as controller@scenario")
     p.add_argument("--compose", choices=COMPOSE_CHOICES, default="none", help=COMPOSE_HELP)
-    p.add_argument("--worlds", nargs="+", choices=("ideal", "realistic"),
+    p.add_argument("--conditions", nargs="+", choices=("ideal", "realistic"),
                    default=["ideal", "realistic"], help="ideal: the paper's setting; "
                    "realistic: the shipped realistic condition (noise, delays, estimated "
                    "tyre forces); default both")

@@ -5,7 +5,7 @@ of each table beside the paper's, the allocation note and ``fourws paper``. Ever
 computed from a recorded bag by ``scoring.score_run`` (the same code ``fourws run`` and
 ``fourws report`` use), so any table can be regenerated from the bags alone.
 
-Two worlds (:data:`WORLDS`): **ideal**, the paper's setting (the controllers see the truth,
+Two conditions (:data:`CONDITIONS`): **ideal**, the paper's setting (the controllers see the truth,
 commands act at once, tyre forces known), and **realistic**, the shipped condition
 ``config/conditions/realistic.yaml`` (localisation and IMU noise, one period of computation
 delay, 40 ms of steering dead time, estimated tyre forces; the delays known to the
@@ -58,8 +58,9 @@ TABLES = (
 PAPER_RUNS = [(c, "dlc_60_mu05") for c in ("mpc_fws", "mpc_4ws", "improved", "ampc_4ws",
                                               "ampc_4ws_dyc")] + \
              [(c, "dlc_90_mu06") for c in ("mpc_fws", "mpc_4ws", "improved")]
-#: world -> the shipped condition it runs under (None: ideal)
-WORLDS = {"ideal": None, "realistic": "realistic"}
+#: the conditions the paper's runs are made under (``core.conditions``): the paper's ideal
+#: setting and the shipped realistic one
+CONDITIONS = ("ideal", "realistic")
 # Completed runs whose max |eY| differ by less than this fraction of the larger one tie: the
 # lockstep runs are deterministic, but an order decided by under 1 % is not a finding.
 TIE_REL = 0.01
@@ -73,13 +74,13 @@ def run_dir_name(controller: str, scenario: str, world: str = "ideal") -> str:
     return base if world == "ideal" else f"{base}@{world}"
 
 
-def _world_condition(world: str, seed: int = 0):
+def paper_condition(name: str, seed: int = 0):
+    """The condition ``name`` of :data:`CONDITIONS` with its noise seed."""
     from .core.conditions import IDEAL, load_condition
 
-    if world not in WORLDS:
-        raise ValueError(f"world '{world}': not one of {sorted(WORLDS)}")
-    name = WORLDS[world]
-    return IDEAL if name is None else load_condition(name, seed)
+    if name not in CONDITIONS:
+        raise ValueError(f"condition '{name}': not one of {list(CONDITIONS)}")
+    return IDEAL if name == IDEAL.name else load_condition(name, seed)
 
 
 def _fmt(v) -> str:
@@ -205,7 +206,7 @@ def margins_line(scenario: str, controllers: list[str], world: str = "ideal") ->
     from .core.margins import margins
 
     sc = load_scenario(scenario)
-    cond = _world_condition(world)
+    cond = paper_condition(world)
     parts = []
     for c in controllers:
         m = margins(load_mpc_config(c, node_parameters(cond)["mpc_node"]), sc.vehicle,
@@ -247,7 +248,7 @@ def allocation_note(out: Path, results: dict[tuple[str, str], dict]) -> str:
 
 
 def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
-              compose: str = "none", worlds: tuple[str, ...] = tuple(WORLDS),
+              compose: str = "none", conditions: tuple[str, ...] = CONDITIONS,
               seed: int = 0) -> int:
     """``fourws paper``: the eight runs in each world, the tables beside the paper's,
     report.md.
@@ -257,14 +258,14 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
     folders kept. Any other non-empty folder is refused. ``seed``: the realistic world's
     noise seed.
     """
-    conds = {w: _world_condition(w, seed) for w in worlds}
+    conds = {w: paper_condition(w, seed) for w in conditions}
     prepare_out_dir(out, force, problem=paper_folder_problem, replace=False,
                     what="fourws paper output (" + ", ".join(PAPER_FOLDER_ENTRIES)
                     + ", CONTROLLER@SCENARIO[@WORLD]/ run folders)")
-    runs = [(c, s, w) for w in worlds for c, s in PAPER_RUNS]
+    runs = [(c, s, w) for w in conditions for c, s in PAPER_RUNS]
     if only:
         runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
-    results: dict[str, dict[tuple[str, str], dict]] = {w: {} for w in worlds}
+    results: dict[str, dict[tuple[str, str], dict]] = {w: {} for w in conditions}
     t_start = time.monotonic()
     for i, (ctrl, scen, world) in enumerate(runs):
         bar = "#" * i + "." * (len(runs) - i)
@@ -280,8 +281,8 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
               file=sys.stderr)
     # the realistic world's ranking is over five seeds: the other four in process
     seeded: dict[str, dict[tuple[str, str], list[dict]]] = {}
-    for w in worlds:
-        if WORLDS[w] is None:
+    for w in conditions:
+        if w == "ideal":
             continue
         from .core.closed_loop import run_closed_loop
 
@@ -289,15 +290,15 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
         for (ctrl, scen), m in results[w].items():
             extra = []
             for k in range(1, N_SEEDS):
-                log = run_closed_loop(scen, ctrl, condition=_world_condition(w, seed + k))
+                log = run_closed_loop(scen, ctrl, condition=paper_condition(w, seed + k))
                 extra.append(log.metrics())
             seeded[w][(ctrl, scen)] = [m, *extra]
     wall = time.monotonic() - t_start
     parts = []
-    for w in worlds:
+    for w in conditions:
         head = ("## Ideal world: the paper's setting (truth in, no delay, tyre forces known)"
                 if w == "ideal" else
-                f"## Realistic world: `{WORLDS[w]}` condition; tables: noise seed {seed} over "
+                f"## Realistic world: `{w}` condition; tables: noise seed {seed} over "
                 f"topics; rankings: seeds {seed}-{seed + N_SEEDS - 1}")
         parts += [head, "", format_tables(results[w], w, seeded.get(w))]
         note = allocation_note(out, results[w]) if w == "ideal" else ""

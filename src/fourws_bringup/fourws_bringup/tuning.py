@@ -10,7 +10,7 @@ The procedure, the same for every group of controllers (the spec's ``groups``):
    ``grid_exponents``: the same grid, so the same budget, for every group.
 2. **Margin.** A candidate is kept only if every controller of the group has a spectral radius
    ρ ≤ ``max_spectral_radius`` (``core.margins``) at every speed of ``margin.speeds_kmh`` in
-   every world of ``margin.worlds`` (a plant delay and dead time, which the controller is told
+   every condition of ``margin.conditions`` (its delay and dead time, which the controller is told
    of: it compensates them). A group with no kept candidate is an error, not a silent default.
 3. **Closed loop.** Every kept candidate of a group runs every controller of the group on every
    tuning scenario under every tuning condition and seed (the in-process loop of
@@ -43,7 +43,7 @@ from typing import Any
 from fourws_common.params import read_yaml_file
 from fourws_mpc.core.config import MpcConfig
 
-from .core.conditions import condition_from_mapping, condition_mapping
+from .core.conditions import Condition, condition_from_mapping, condition_mapping
 from .core.configs import (
     beside,
     controller_preset_path,
@@ -80,7 +80,7 @@ class TuningSpec:
     max_spectral_radius: float
     speeds_kmh: tuple[float, ...]
     margin_scenario: str
-    worlds: Mapping[str, tuple[int, float]]      # name -> (delay periods, dead time s)
+    margin_conditions: Mapping[str, Condition]   # name -> its delays (the rest unused)
     scenarios: tuple[str, ...]
     seeds: tuple[int, ...]
     conditions: Mapping[str, Mapping[str, Any]]
@@ -99,11 +99,10 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     if missing or unknown:
         raise ValueError(f"{path}: missing {missing}, unknown {unknown}")
     m = d["margin"]
-    if not m.get("speeds_kmh") or not m.get("worlds"):
-        raise ValueError(f"{path}: margin needs at least one of speeds_kmh and of worlds")
-    worlds = {str(k): (int(v.get("delay_periods", 0)),
-                       float(v.get("steer_dead_time_ms", 0.0)) * 1e-3)
-              for k, v in m["worlds"].items()}
+    if not m.get("speeds_kmh") or not m.get("conditions"):
+        raise ValueError(f"{path}: margin needs at least one of speeds_kmh and of conditions")
+    margin_conditions = {str(k): condition_from_mapping({"name": str(k), **(v or {})})
+                         for k, v in m["conditions"].items()}
     known = {f.name for f in dataclasses.fields(MpcConfig)}
     groups = []
     for name, g in d["groups"].items():
@@ -115,7 +114,8 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     scen = tuple(beside(path, s) for s in d["scenarios"])
     return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
                       float(d["max_spectral_radius"]),
-                      tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]), worlds,
+                      tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]),
+                      margin_conditions,
                       scen, tuple(int(s) for s in d["seeds"]), dict(d["conditions"]),
                       tuple(groups))
 
@@ -149,7 +149,8 @@ def loops(spec: TuningSpec, group: Group, cand: Mapping[str, float]
 
     vehicle = load_scenario(spec.margin_scenario).vehicle
     for c in group.controllers:
-        for world, (n_d, dead) in spec.worlds.items():
+        for world, cond in spec.margin_conditions.items():
+            n_d, dead = cond.delay_periods, cond.steer_dead_time_s
             cfg = load_mpc_config(c, {**cand, "input_delay_periods": n_d,
                                       "steer_dead_time_s": dead})
             for v_kmh in spec.speeds_kmh:
