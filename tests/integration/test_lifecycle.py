@@ -22,10 +22,11 @@ from conftest import cut_scenario
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 
-from fourws_bringup import graph, runner
+from fourws_bringup import runner
 from fourws_bringup.bag.run_data import read_run
 from fourws_bringup.core.closed_loop import run_closed_loop
 from fourws_bringup.core.configs import load_mpc_config
+from fourws_bringup.graph import graph_specs
 from fourws_bringup.scoring import score_run
 from fourws_bringup.supervisor import NodeDied, NodeSpec
 from fourws_common.conversions import fill_vehicle_state, ns_to_stamp, stamp_to_ns
@@ -61,7 +62,7 @@ def _plant(scenario: Path, status_file: Path, **params) -> NodeSpec:
 
 
 def _controllers(mode: str = "lockstep") -> list[NodeSpec]:
-    specs = graph.graph_specs("dlc_60_mu05", CONTROLLER, None, mode)
+    specs = graph_specs("dlc_60_mu05", CONTROLLER, None, mode)
     return [s for s in specs if s.name != "plant_node"]
 
 
@@ -230,7 +231,7 @@ def test_a_future_stamped_state_does_not_freeze_a_running_graph(graph, ros, tmp_
     running lockstep graph: every controller rejects them (counted on /diagnostics) and the
     run completes; the bag scores in moments, the strays left out of its timeline."""
     bag = tmp_path / "bag"
-    specs = graph.graph_specs("dlc_60_mu05", CONTROLLER, bag, status_file=tmp_path / "s.json")
+    specs = graph_specs("dlc_60_mu05", CONTROLLER, bag, status_file=tmp_path / "s.json")
     specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
     states = _record_states(ros)
     stray_pub = ros.node.create_publisher(VehicleState, "/vehicle/state", CONTROL_QOS)
@@ -476,7 +477,7 @@ def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_p
     answers the newest state, not the 200 it missed. The bag starts at step 0."""
     status = tmp_path / "status.json"
     # 100 m, about 6 s: 1 s of run, the 2 s stall, 3 s after it
-    specs = graph.graph_specs(str(_cut(tmp_path, 100.0)), CONTROLLER, tmp_path / "bag",
+    specs = graph_specs(str(_cut(tmp_path, 100.0)), CONTROLLER, tmp_path / "bag",
                                mode="realtime", status_file=status)
     specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
     states = _record_states(ros)

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from conftest import cut_scenario
 
-from fourws_bringup import graph
 from fourws_bringup.bag.run_data import read_run
+from fourws_bringup.graph import graph_specs
 from fourws_bringup.supervisor import NodeDied, NodeSpec, last_error_line
 from fourws_common.exit_codes import ExitCode
 from fourws_common.vehicle_info import load_vehicle_info, read_vehicle_file
@@ -27,7 +27,7 @@ CAR = "c_segment"
 
 
 def _controllers(**params) -> list[NodeSpec]:
-    specs = [s for s in graph.graph_specs("dlc_60_mu05", "improved", None, "lockstep")
+    specs = [s for s in graph_specs("dlc_60_mu05", "improved", None, "lockstep")
              if s.name != "plant_node"]
     for s in specs:
         s.parameters.update(params)
