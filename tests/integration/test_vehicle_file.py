@@ -62,6 +62,22 @@ def test_every_controller_node_takes_the_cars_constants(graph, ros, tmp_path):
         info.mass_kg, 4 * info.motor_torque_max_nm]
     assert _get(ros, "allocator_node", ["mass_kg", "wheel_radius_m", "vehicle_file"]) == [
         info.mass_kg, info.wheel_radius_m, CAR]
+    # the car is read at start: another car at runtime is refused, the same one accepted
+    assert not _set(ros, "mpc_node", "vehicle_file", "paper").successful
+    assert _set(ros, "mpc_node", "vehicle_file", CAR).successful
+    assert _get(ros, "mpc_node", ["yaw_inertia_kg_m2"]) == [info.yaw_inertia_kg_m2]
+
+
+def _set(ros, node: str, name: str, value):
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    cli = ros.node.create_client(SetParameters, f"/{node}/set_parameters")
+    assert ros.spin_until(cli.service_is_ready, 30)
+    fut = cli.call_async(SetParameters.Request(
+        parameters=[Parameter(name, value=value).to_parameter_msg()]))
+    assert ros.spin_until(fut.done, 30)
+    return fut.result().results[0]
 
 
 def test_a_car_file_that_does_not_load_stops_the_node_naming_the_key(graph, tmp_path):

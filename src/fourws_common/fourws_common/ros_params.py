@@ -137,21 +137,32 @@ class ParamBinding(Generic[T]):
 
 
 def vehicle_defaults(node: Node, node_key: str) -> dict[str, Any]:
-    """Declare ``node``'s read-only ``vehicle_file`` parameter (a shipped car's name or a
-    car file's path; empty: the paper's car) and return the parameter defaults the node
-    ``node_key`` takes from that car (:func:`fourws_common.vehicle_info.node_vehicle_values`),
-    for :class:`ParamBinding`'s ``defaults``. ``ValueError`` names a bad file or key."""
+    """Declare ``node``'s ``vehicle_file`` parameter (a shipped car's name or a car file's
+    path; empty: the paper's car) and return the parameter defaults the node ``node_key``
+    takes from that car (:func:`fourws_common.vehicle_info.node_vehicle_values`), for
+    :class:`ParamBinding`'s ``defaults``. The car is read at start: a runtime set of another
+    car is refused with the reason, one of the same value (a ``ros2 param load`` of the
+    node's own dump) is accepted. ``ValueError`` names a bad file or key."""
     from fourws_common.vehicle_info import load_vehicle_info, node_vehicle_values
 
     desc = ParameterDescriptor(description="car file: a name in fourws_common/config/"
-                               "vehicles or a path; empty: the paper's car (read at start)",
-                               read_only=True)
+                               "vehicles or a path; empty: the paper's car (read at start)")
     try:
         name = node.declare_parameter("vehicle_file", "", desc).value
     except InvalidParameterTypeException:
         raise ValueError(f"parameter 'vehicle_file' of {node.get_name()}: expected a string "
                          "(a car's name or a file's path)") from None
-    return node_vehicle_values(node_key, load_vehicle_info(name or None))
+    values = node_vehicle_values(node_key, load_vehicle_info(name or None))
+
+    def keep_car(params: list[Parameter]) -> SetParametersResult:
+        for p in params:
+            if p.name == "vehicle_file" and p.value != name:
+                return SetParametersResult(successful=False, reason=(
+                    "vehicle_file is read at start: restart the node for another car"))
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(keep_car)
+    return values
 
 
 #: Parameters every rclpy node may be given without declaring them.
