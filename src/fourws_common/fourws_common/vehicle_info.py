@@ -97,17 +97,9 @@ def list_vehicles() -> list[str]:
 def vehicle_path(name_or_path: str | Path | None = None) -> Path:
     """The car file of a shipped name, or the given path ("" or ``None``: the default car).
     ``ValueError`` names the known cars or the missing file."""
-    text = str(name_or_path or DEFAULT_VEHICLE)
-    if text.endswith((".yaml", ".yml")) or "/" in text:
-        path = Path(text)
-        if not path.is_file():
-            raise ValueError(f"vehicle file not found: {path}")
-        return path
-    path = vehicles_dir() / f"{text}.yaml"
-    if not path.is_file():
-        raise ValueError(f"vehicle '{text}' not found in {path.parent} "
-                         f"(known: {', '.join(list_vehicles())})")
-    return path
+    from fourws_common.resources import named_yaml
+
+    return named_yaml(name_or_path or DEFAULT_VEHICLE, vehicles_dir(), "vehicle")
 
 
 def read_vehicle_file(name_or_path: str | Path | None = None) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from fourws_common.input_guard import InputConfig
 from fourws_common.params import from_mapping, load_ros_params_yaml, read_yaml_file
-from fourws_common.resources import config_dir
+from fourws_common.resources import config_dir, named_yaml
 from fourws_common.vehicle_info import load_vehicle_info, node_vehicle_values
 
 if TYPE_CHECKING:  # imported where loaded: the MPC's pulls in numba, osqp and scipy (~0.5 s
@@ -76,16 +76,7 @@ def preset_label(entry: str) -> str:
 def controller_preset_path(name_or_path: str) -> Path:
     """``controllers/<name>.yaml`` of fourws_bringup, or the given file; ``ValueError``
     naming the known presets otherwise."""
-    p = Path(name_or_path)
-    if is_yaml_path(name_or_path) or p.is_file():
-        if not p.is_file():
-            raise ValueError(f"controller preset file not found: {p}")
-        return p
-    path = controllers_dir() / f"{name_or_path}.yaml"
-    if not path.is_file():
-        raise ValueError(f"controller '{name_or_path}' not found in {path.parent} "
-                         f"(known: {', '.join(list_controllers())})")
-    return path
+    return named_yaml(name_or_path, controllers_dir(), "controller preset")
 
 
 def package_file(node: str) -> Path:
