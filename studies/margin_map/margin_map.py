@@ -6,7 +6,7 @@
         [--out studies/margin_map/margin-map.md]
 
 ``fourws tune`` keeps a candidate when its spectral radius ρ ≤ ``max_spectral_radius``
-(step 2 of ``docs/tuning.md``); a vehicle engineer would also ask for a gain margin of about
+(step 2 of ``docs/bench.md``, Tuning); a vehicle engineer would also ask for a gain margin of about
 6 dB and a phase margin of about 30°. This map answers whether the grid holds a candidate
 that has both, group by group, without running a closed loop: for every candidate, on the
 very loops step 2 analyses (``fourws_bringup.tuning.loops``: every controller of the group,

@@ -1,6 +1,6 @@
 """The node table of a run: which processes, with which params files, parameters,
 namespaces and clocks (``graph_specs``, ``control_specs``); used by ``fourws run``, the launch
-files and the tests, so they start the same graph (docs/architecture.md, "Graph").
+files and the tests, so they start the same graph (docs/graph.md).
 """
 
 from __future__ import annotations
@@ -127,7 +127,7 @@ def graph_specs(scenario: str, controller: str, bag_dir: Path | None, mode: str 
     if bag_dir is not None:
         # The recorder is off the control chain (it buffers and writes chunks), so it yields
         # the CPU to the nodes the next step waits on: on 2 cores this cut the median step
-        # time by about 10 % (docs/architecture.md, "Timing").
+        # time by about 10 % (docs/graph.md, "Timing").
         specs.append(NodeSpec("recorder_node", "fourws_bringup", "recorder_node",
                               params_files=files("recorder_node"),
                               parameters={"output_dir": str(bag_dir), **recorder_gate,

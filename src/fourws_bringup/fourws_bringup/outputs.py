@@ -2,7 +2,7 @@
 
 A folder is made writable for a run (``prepare_out_dir``), its kind is told from its content
 (``run_folder_problem``), and an ``OSError`` becomes one line (``output_error``): a full disk
-is exit code 1, anything else a bad argument, 2 (docs/architecture.md, "Lifecycle and bad
+is exit code 1, anything else a bad argument, 2 (docs/graph.md, "Lifecycle and bad
 input").
 """
 

@@ -1,5 +1,5 @@
 """``fourws tune SPEC.yaml [--workers N] [--check]``: one written tuning procedure for every
-controller, whose output is the shipped preset YAML (``docs/tuning.md``).
+controller, whose output is the shipped preset YAML (``docs/bench.md``, "Tuning").
 
 The procedure, the same for every group of controllers (the spec's ``groups``):
 

@@ -1,6 +1,6 @@
 """A run and its score: ``fourws run`` (the graph over topics, then metrics.json and figures
 from its bag) and ``fourws report`` (the same from a bag alone); ``fourws paper`` runs the
-former for each of its configurations (docs/architecture.md, "Running").
+former for each of its configurations (docs/graph.md, "Runs").
 """
 
 from __future__ import annotations

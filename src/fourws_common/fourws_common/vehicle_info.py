@@ -1,4 +1,4 @@
-"""The car description: one file read by every node (docs/architecture.md, "One car file").
+"""The car description: one file read by every node (docs/graph.md, "One car file").
 
 A car file (``fourws_common/config/vehicles/<name>.yaml``, or any path) is the flat mapping
 of the plant's :class:`fourws_sim.core.vehicle_params.VehicleParams` fields plus the derived

@@ -1,6 +1,6 @@
 """The whole control loop in one process, without ROS: plant, MPC, speed PID, allocator.
 
-Same sequencing as the lockstep graph (docs/architecture.md, "Timing") at every step k::
+Same sequencing as the lockstep graph (docs/graph.md, "Timing") at every step k::
 
     outputs(k) ──► mpc.step(t_k, outputs(k), mu=mean μ)      → δf, δr, Mz      (mpc_node)
                ──► pid.step(v_ref, vx, T, a_ref)             → T_total         (speed_pid_node)

@@ -50,7 +50,7 @@ class MpcConfig:
     q_y: float = param(10.0, "fixed output weight Q_Y", lo=0.0, hi=1e9)
     r_ddelta: float = param(1.0, "fixed steer-increment weight R_Δδ", lo=1e-9, hi=1e9)
     r_dmz: float = param(1.0, "fixed yaw-moment-increment weight R_ΔMz", lo=1e-9, hi=1e9)
-    # beyond the paper (docs/mpc.md, "The yaw moment's free direction")
+    # beyond the paper (docs/mpc.md, "The yaw moment's level")
     mz_level_weight: float = param(
         0.0088, "weight of the yaw moment's level |Mz(k+i)|, i = 0..Np−1, relative to its "
         "increment weight R_ΔMz (both on Mz / scale_dmz_nm); 0 is the paper's cost", lo=0.0,

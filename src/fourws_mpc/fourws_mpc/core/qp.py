@@ -31,7 +31,7 @@ i = 0..Np−1 (the plan held after N_c, as the prediction holds it)::
     J += Σ_{i=0..Np−1} ‖u(k+i)‖²_S
 
 It pins an input direction the increment-only cost leaves free (a yaw moment held by
-counter-steer: no motion, no cost; docs/mpc.md, "The yaw moment's free direction").
+counter-steer: no motion, no cost; docs/mpc.md, "The yaw moment's level").
 
 Beyond the paper, an optional terminal cost (``terminal_cost``): the infinite-horizon LQR's
 cost-to-go in velocity form at the horizon's end, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref;

@@ -3,7 +3,7 @@
 
 The paper's cost, eq. (16), ends at N_p: what happens after the horizon is not priced, so a
 short horizon (N_p 12, 0.12 s) must act hard on the road it sees, and a soft output weight
-lets the loop drift (docs/tuning.md). The textbook remedy (Rawlings, Mayne & Diehl, *Model
+lets the loop drift (docs/mpc.md). The textbook remedy (Rawlings, Mayne & Diehl, *Model
 Predictive Control*, 2nd ed., 2017, ch. 2) is a terminal cost V_f(x_Np) equal to the cost-to-go
 of the unconstrained infinite-horizon problem; the unconstrained MPC is then the LQR of the
 same stage cost, whatever N_p.

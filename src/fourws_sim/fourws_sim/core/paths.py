@@ -5,7 +5,7 @@ Every path starts with a straight (or asymptotically straight) lead-in at X = ``
 heading ``yaw`` is continuous (unwrapped), in rad, CCW from X; curvature in 1/m, positive to
 the left; ``s`` the arc length from the first sample.
 
-1. ``tanh_dlc``: the "double shifting line" of the literature (docs/architecture.md, Paper notes)::
+1. ``tanh_dlc``: the "double shifting line" of the literature (docs/plant.md, "Reference paths")::
 
        z_i = shape/dx_i (X/σ − Xs_i) − shape/2,      k_i = shape/dx_i
        Y   = dy1/2 (1 + tanh z1) − dy2/2 (1 + tanh z2)

@@ -20,7 +20,7 @@ limits are the plant's parameters (``plant.yaml``: ``abort_lateral_error_m``,
 ``abort_sideslip_deg``; :class:`AbortLimits`), read by the plant node and the in-process loop
 alike, and :meth:`Scenario.check_end` takes them.
 
-Drivability (docs/architecture.md): the path's peak lateral-acceleration demand max κ v² is
+Drivability (docs/plant.md): the path's peak lateral-acceleration demand max κ v² is
 computed at the scenario's speed profile and compared with μ g, μ the lowest adhesion on the
 road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
 :meth:`Scenario.summary` gives the one-line statement to print with every run.

@@ -1,8 +1,8 @@
 """Wheel-slip limiter after the allocation: what a car's ABS and traction control do.
 
 Beyond the paper (its allocation, eq. 25-31, assumes every wheel delivers its torque). Each
-wheel's longitudinal slip from the measured wheel speed and the car's motion (docs/lower-layer
-in docs/architecture.md, "Wheel-slip limiter")::
+wheel's longitudinal slip from the measured wheel speed and the car's motion (docs/lower-layer.md,
+"Wheel-slip limiter")::
 
     v_i = (v_x − r y_i) cos δ_i + (v_y + r x_i) sin δ_i      (wheel centre along its heading)
     κ_i = (ω_i R − v_i) / max(|v_i|, v_min)
