@@ -1,43 +1,15 @@
-"""A terminal cost for the MPC: the infinite-horizon LQR's cost-to-go in velocity form
-(beyond the paper; ``terminal_cost: lqr``, docs/mpc.md, "A terminal cost").
+"""The LQR cost-to-go after the horizon, in velocity form, as the MPC's terminal cost
+(beyond eq. 16; ``terminal_cost: lqr``; docs/mpc.md, "A terminal cost").
 
-The paper's cost, eq. (16), ends at N_p: what happens after the horizon is not priced, so a
-short horizon (N_p 12, 0.12 s) must act hard on the road it sees, and a soft output weight
-lets the loop drift (docs/mpc.md). The textbook remedy (Rawlings, Mayne & Diehl, *Model
-Predictive Control*, 2nd ed., 2017, ch. 2) is a terminal cost V_f(x_Np) equal to the cost-to-go
-of the unconstrained infinite-horizon problem; the unconstrained MPC is then the LQR of the
-same stage cost, whatever N_p.
+Over the lateral states x_L (all but v_x and X) and the enabled inputs::
 
-The stage cost prices output errors and input *increments* (eq. 16), so its steady state
-needs no reference for the states and inputs that are not outputs when it is written in
-velocity form (Pannocchia & Rawlings, AIChE J. 49, 2003): with the lateral states x_L of
-the prediction model (every state but v_x and X), the discrete model x(k+1) = A x + B u + d
-gives
-
-    z = [Δx_L − Δx_L,ref; e],  Δx_L(k) = x_L(k) − x_L(k−1),  e = [φ − φ_ref, Y − Y_ref]
-    z(k+1) = A_z z(k) + B_z Δu(k),
+    z = [Δx_L − Δx_L,ref; φ − φ_ref; Y − Y_ref],   z(k+1) = A_z z(k) + B_z Δu(k),
     A_z = [[A_L, 0], [C_L A_L, I]],   B_z = [[B_L], [C_L B_L]]
 
-X is dropped exactly (its column of A is zero off the diagonal). Dropping v_x is an
-approximation: its couplings with the lateral states (A[v_y, v_x], A[r, v_x], the v_x row's
-v_y r and steering-drag terms) vanish on a straight at zero input and are small beside the
-lateral dynamics elsewhere; the speed has its own controller. The reference's own motion
-after the horizon: on a curve a car on the path still turns (Δφ_ref = φ_ref,Np − φ_ref,Np−1,
-and ΔY_ref likewise, in the prediction frame), so Δx_L,ref holds those two increments of the
-reference's last step and zero for the states that are steady in steady cornering (v_y, r,
-the actuators' and tyres' lags).
-
-(A_L, B_L the lateral rows and columns of A, B, the enabled inputs only; C_L picks φ, Y).
-With Q_z = diag(0, Q) and R the stage weights, P solves the DARE of (A_z, B_z, Q_z, R) and
-the cost-to-go from the horizon's end is z_Npᵀ P z_Np. The MPC's sum already holds the stage
-at i = N_p, so the terminal weight added is W = P − Q_z (positive semidefinite: P ≥ Q_z).
-With N_c = N_p and no active bound the MPC's first move is then the LQR's on a straight at
-zero input (unit test).
-The input-level penalty (``input_level_cost``) has no velocity form and is left out of P.
-The velocity form needs at least as many enabled inputs as outputs (two): with front steer
-alone a mode at λ = 1 is not stabilisable (the PBH test), no stabilising P exists, and
-``terminal_weight`` refuses (``MpcConfig`` refuses the combination at start-up); a terminal
-cost for it would need the state form with a steady-state reference.
+Δx_L,ref holds the reference's last increments of φ and Y (zero elsewhere). P solves the DARE
+of (A_z, B_z, diag(0, Q), R); the weight added at the horizon's end is W = P − diag(0, Q).
+With front steer alone (one input, two outputs) a mode at 1 is not stabilisable and
+:func:`terminal_weight` refuses.
 """
 
 from __future__ import annotations
