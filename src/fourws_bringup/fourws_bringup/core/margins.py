@@ -63,7 +63,7 @@ from fourws_mpc.core.delay import channel_delays, register_schedule
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
-from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, hold_coefficients
+from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, observer_state_space
 from fourws_sim.core.actuators import motor_state_space
 from fourws_sim.core.vehicle_params import VehicleParams
 
@@ -147,11 +147,10 @@ def _zeta(n_model: int, n_ext: int) -> np.ndarray:
 
 
 def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> np.ndarray:
-    """The slip observer of ``relaxation_model.SlipObserver`` in the loop: with the memory
-    m(k) = e α̂'(k−1) + (g − e) α(k−1) as two states, α̂'(k) = m(k) + (1 − g) α(k) (written
-    into the α' rows of ``Zs``) and m(k+1) = e m(k) + g (1 − e) α(k), α the kinematic slip
-    of the plant's v_y, r and road-wheel angles; x = T v_x/σ, e = exp(−x), g = (1 − e)/x.
-    Returns the observer's rows of the loop matrix (n, n)."""
+    """The slip observer in the loop, in its own linear form
+    (``relaxation_model.observer_state_space``): its memory per axle as a loop state, α̂'
+    written into the α' rows of ``Zs``, α the kinematic slip of the plant's v_y, r and
+    road-wheel angles. Returns the observer's rows of the loop matrix (n, n)."""
     p = cfg.model_params()
     vxs = max(vx, p.min_speed_mps)
     A = np.zeros((n, n))
@@ -161,11 +160,11 @@ def _observer(cfg: MpcConfig, vx: float, n: int, i_obs: int, Zs: np.ndarray) -> 
                                              p.relaxation_length_rear_m))):
         kin = np.zeros(n)
         kin[d], kin[VY], kin[R] = 1.0, -1.0 / vxs, -arm / vxs
-        e, g = hold_coefficients(cfg.dt_s, vxs, sig)
-        Zs[row] = (1.0 - g) * kin
-        Zs[row, i_obs + j] = 1.0
-        A[i_obs + j, i_obs + j] = e
-        A[i_obs + j] += g * (1.0 - e) * kin
+        a_m, b_m, c_m, d_m = observer_state_space(cfg.dt_s, vxs, sig)
+        Zs[row] = d_m * kin
+        Zs[row, i_obs + j] = c_m
+        A[i_obs + j, i_obs + j] = a_m
+        A[i_obs + j] += b_m * kin
     return A
 
 

@@ -145,9 +145,19 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
 def hold_coefficients(dt_s: float, vx: float, sigma_m: float) -> tuple[float, float]:
     """(e, g) of :class:`SlipObserver`'s first-order hold: x = T vx/σ, e = exp(−x),
     g = (1 − e)/x (accurate for small x), so α̂'(k) = e α̂'(k−1) + (1 − g) α(k) + (g − e) α(k−1)
-    (the one statement; ``core.margins`` builds the observer's loop states from it)."""
+    (the one statement; :func:`observer_state_space` is its linear form)."""
     x = dt_s * vx / sigma_m
     return math.exp(-x), -math.expm1(-x) / x
+
+
+def observer_state_space(dt_s: float, vx: float, sigma_m: float
+                         ) -> tuple[float, float, float, float]:
+    """(a, b, c, d) of :class:`SlipObserver` as a linear system in its memory
+    m(k) = e α̂'(k−1) + (g − e) α(k−1): m(k+1) = a m(k) + b α(k), α̂'(k) = c m(k) + d α(k),
+    with a = e, b = g (1 − e), c = 1, d = 1 − g (:func:`hold_coefficients`); what the
+    stability margins close the loop with (``fourws_bringup.core.margins``)."""
+    e, g = hold_coefficients(dt_s, vx, sigma_m)
+    return e, g * (1.0 - e), 1.0, 1.0 - g
 
 
 @dataclass(frozen=True, slots=True)
