@@ -115,11 +115,7 @@ def scenario_record(scenario: Any) -> dict[str, str]:
     ``scenario_file``, ``scenario_sha256``): the ``scenario`` name is the file's own
     ``name:``, which an edited copy keeps. Empty for a scenario built without a file."""
     source = getattr(scenario, "source", None)
-    if source is None:
-        return {}
-    path = Path(source).resolve()
-    return {"scenario_file": str(path),
-            "scenario_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    return {} if source is None else _file_record("scenario", Path(source))
 
 
 def vehicle_record(vehicle: str) -> dict[str, str]:
@@ -127,9 +123,14 @@ def vehicle_record(vehicle: str) -> dict[str, str]:
     SHA-256 of its content (metrics.json's ``vehicle_file``, ``vehicle_sha256``)."""
     from fourws_common.vehicle_info import vehicle_path
 
-    path = vehicle_path(vehicle or None).resolve()
-    return {"vehicle_file": str(path),
-            "vehicle_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    return _file_record("vehicle", vehicle_path(vehicle or None))
+
+
+def _file_record(what: str, path: Path) -> dict[str, str]:
+    """``{what}_file`` (absolute) and ``{what}_sha256`` of its content."""
+    path = path.resolve()
+    return {f"{what}_file": str(path),
+            f"{what}_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
 def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str, Any]:

@@ -201,7 +201,8 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     # extended state: plant, command delay registers (3 per period), steer dead-time
     # registers (2 per period), controller memory u(k-1), u(k-2), ... (3 each)
     n_del, n_dead_s = 3 * delay_periods, 2 * n_dead
-    Ak, Bk, _ = model_matrices(cfg, vx)
+    mpc = _controller(cfg) if cfg.law != "lqr_ff" else None
+    Ak, Bk, _ = (mpc.linearisation(vx) if mpc is not None else model_matrices(cfg, vx))
     n_model = Ak.shape[0]
     # the slip observer's memory (2 states) for the relaxation-aware model
     n_obs = 2 if n_model == N_STATE_RELAX else 0
@@ -228,7 +229,7 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
         X[ErrIdx.E2_DOT] = Zs[StateIdx.R]
         C_u[0] = -(K @ X)[0]
     else:
-        K = mpc_gain(cfg, vx)                       # Δu = −K [ζ; u(k−1)]
+        K = mpc.unconstrained_gain(vx)              # Δu = −K [ζ; u(k−1)]
         Z = np.zeros((n_model + N_INPUT, n))
         Z[:n_model] = Zs
         Z[n_model:, i_mem:i_mem + N_INPUT] = np.eye(N_INPUT)
