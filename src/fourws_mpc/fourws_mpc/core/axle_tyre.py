@@ -19,10 +19,13 @@ from __future__ import annotations
 
 import math
 
+from numba import njit
+
 #: lower bound on the peak force in the model (N): keeps B = K/(C D) finite
 MIN_PEAK_N = 1.0
 
 
+@njit(cache=True)
 def _g(z: float, c: float, e: float) -> tuple[float, float]:
     """g(z) = sin(C atan φ) and g'(z)."""
     phi = z - e * (z - math.atan(z))
@@ -31,10 +34,11 @@ def _g(z: float, c: float, e: float) -> tuple[float, float]:
     return math.sin(ang), math.cos(ang) * c * dphi / (1.0 + phi * phi)
 
 
+@njit(cache=True)
 def force(alpha: float, k: float, d: float, c: float, e: float
           ) -> tuple[float, float, float]:
     """(F, ∂F/∂α, ∂F/∂D) of the axle at slip angle ``alpha`` (rad), stiffness ``k`` (N/rad),
-    peak ``d`` (N, floored at :data:`MIN_PEAK_N`), shape ``c`` and curvature ``e``."""
+    peak ``d`` (N, floored at :data:`MIN_PEAK_N`), shape ``c`` and curvature ``e`` (compiled)."""
     d = max(d, MIN_PEAK_N)
     b = k / (c * d)
     z = b * alpha

@@ -137,7 +137,7 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
 @njit(cache=True)
 def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarray,
                 e_free: np.ndarray, th_hard: np.ndarray, hard_free: np.ndarray,
-                D: np.ndarray, en: np.ndarray, u_min_t: np.ndarray, u_max_t: np.ndarray,
+                D: np.ndarray, en: np.ndarray, u_min: np.ndarray, u_max: np.ndarray,
                 u_prev: np.ndarray, band: np.ndarray, vy_max: float, r_max: float,
                 state_bounds: bool, from_step: int, softness: float) -> None:
     """Stage 4: the step's rows of A and the bounds (lo, hi), in place, in the row order of
@@ -159,8 +159,8 @@ def constraints(A: np.ndarray, lo: np.ndarray, hi: np.ndarray, th_out: np.ndarra
             k = j * nu + c
             for m in range(n_c):
                 A[o + k, m * nu + c] = D[m * nu + c] if m <= j else 0.0
-            lo[o + k] = u_min_t[k] - u_prev[c]
-            hi[o + k] = u_max_t[k] - u_prev[c]
+            lo[o + k] = u_min[c] - u_prev[c]
+            hi[o + k] = u_max[c] - u_prev[c]
     o_h = 2 * ncol + 1                             # v_y, r ≤ bound (+ c bound ε when soft)
     o_hl = o_h + n2                                # v_y, r ≥ −bound (− c bound ε)
     o_sh = o_hl + n2

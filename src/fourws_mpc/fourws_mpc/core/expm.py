@@ -86,6 +86,12 @@ def _expm(A: np.ndarray, theta: np.ndarray, b3: np.ndarray,
     return E
 
 
+@njit(cache=True)
+def expm_compiled(A: np.ndarray) -> np.ndarray:
+    """e^A of a square float matrix, callable from compiled code."""
+    return _expm(A, _THETA, _B[0], _B[1], _B[2], _B[3], _B13)
+
+
 def expm(A: np.ndarray) -> np.ndarray:
     """e^A of a square float matrix (module docstring)."""
     return _expm(np.ascontiguousarray(A, dtype=float), _THETA, *_B, _B13)

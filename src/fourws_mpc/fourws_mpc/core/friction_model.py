@@ -27,11 +27,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from fourws_mpc.core import relaxation_model
 from fourws_mpc.core.actuator_model import ActIdx
 from fourws_mpc.core.axle_tyre import force
-from fourws_mpc.core.model import InputIdx, ModelParams, StateIdx
+from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, packed
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
 N_STATE_FRICTION = relaxation_model.N_STATE_RELAX
@@ -47,18 +48,26 @@ class Grip:
     ax_mps2: float = 0.0
 
 
-def axle_loads(p: ModelParams) -> tuple[float, float]:
+def axle_loads(p: ModelParams | ModelTuple) -> tuple[float, float]:
     """Static (F_z,f, F_z,r), N."""
     w = p.mass_kg * p.gravity_mps2
     length = p.a_m + p.b_m
     return w * p.b_m / length, w * p.a_m / length
 
 
+_axle_loads = njit(cache=True)(axle_loads)
+
+
 def ellipse(mz: float, p: ModelParams, g: Grip) -> tuple[float, float]:
     """(ε, ∂ε/∂Mz) of the module docstring."""
-    cap = max(g.mu, 1e-3) * p.gravity_mps2
+    return _ellipse(float(mz), packed(p), float(g.mu), float(g.ax_mps2))
+
+
+@njit(cache=True)
+def _ellipse(mz: float, p: ModelTuple, mu: float, ax: float) -> tuple[float, float]:
+    cap = max(mu, 1e-3) * p.gravity_mps2
     k = 2.0 / (p.track_width_m * p.mass_kg * cap)
-    eta_d = g.ax_mps2 / cap
+    eta_d = ax / cap
     eps, deps = 0.0, 0.0
     for sign in (1.0, -1.0):
         eta = eta_d + sign * k * mz
@@ -75,19 +84,30 @@ def ellipse(mz: float, p: ModelParams, g: Grip) -> tuple[float, float]:
 def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
                 ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """((F, ∂F/∂α', ∂F/∂Mz) front, the same rear, ε) at ζ_t."""
-    eps, deps = ellipse(mz, p, g)
-    fz_f, fz_r = axle_loads(p)
-    out = []
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
-        peak = g.mu * fz
-        f, df_da, df_dd = force(float(alpha), 2.0 * c, peak * eps, p.tyre_shape_lateral,
-                                p.tyre_curvature_lateral)
-        out.append((f, df_da, df_dd * peak * deps))
-    return out[0], out[1], eps
+    return _axle_forces(_vector(zeta), float(mz), packed(p), float(g.mu), float(g.ax_mps2))
 
 
-def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelParams,
+@njit(cache=True)
+def _axle_forces(zeta: np.ndarray, mz: float, p: ModelTuple, mu: float, ax: float
+                 ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
+    """:func:`axle_forces`, compiled."""
+    eps, deps = _ellipse(mz, p, mu, ax)
+    fz_f, fz_r = _axle_loads(p)
+    front = _axle(zeta[RelaxIdx.ALPHA_F], 2.0 * p.c_cf, mu * fz_f, eps, deps, p)
+    rear = _axle(zeta[RelaxIdx.ALPHA_R], 2.0 * p.c_cr, mu * fz_r, eps, deps, p)
+    return front, rear, eps
+
+
+@njit(cache=True)
+def _axle(alpha: float, k: float, peak: float, eps: float, deps: float, p: ModelTuple
+          ) -> tuple[float, float, float]:
+    f, df_da, df_dd = force(alpha, k, peak * eps, p.tyre_shape_lateral,
+                            p.tyre_curvature_lateral)
+    return f, df_da, df_dd * peak * deps
+
+
+@njit(cache=True)
+def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelTuple,
                ff: float, fr: float) -> np.ndarray:
     """The rows v̇y, v̇x, ṙ of the module docstring written into the relaxation model's
     f (``out``) with the axle forces ``ff``, ``fr``."""
@@ -103,17 +123,38 @@ def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelParams,
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
     """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
-    (ff, _, _), (fr, _, _), _ = axle_forces(zeta, float(u[InputIdx.MZ]), p, g)
-    return _tyre_rows(relaxation_model.dynamics(zeta, u, p), zeta, u, p, ff, fr)
+    relaxation_model.check(p)
+    return _dynamics(_vector(zeta), _vector(u), packed(p), float(g.mu), float(g.ax_mps2))
 
 
 def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact ``(f, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u): the relaxation model's rows of
     the positions, actuators and slips, and the tyre rows of the module docstring."""
+    relaxation_model.check(p)
+    return jacobians_compiled(_vector(zeta), _vector(u), packed(p), float(g.mu),
+                              float(g.ax_mps2))
+
+
+def _vector(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
+
+
+@njit(cache=True)
+def _dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float
+              ) -> np.ndarray:
+    (ff, _, _), (fr, _, _), _ = _axle_forces(zeta, u[InputIdx.MZ], p, mu, ax)
+    return _tyre_rows(relaxation_model.dynamics_compiled(zeta, u, p), zeta, u, p, ff, fr)
+
+
+@njit(cache=True)
+def jacobians_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`jacobians` on a :data:`~fourws_mpc.core.model.ModelTuple` and the road
+    (μ̂, a_x), compiled."""
     S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
-    f, A, B = relaxation_model.jacobians(zeta, u, p)
-    (ff, dff, mzf), (fr, dfr, mzr), _ = axle_forces(zeta, float(u[I.MZ]), p, g)
+    f, A, B = relaxation_model.jacobians_compiled(zeta, u, p)
+    (ff, dff, mzf), (fr, dfr, mzr), _ = _axle_forces(zeta, u[I.MZ], p, mu, ax)
     f = _tyre_rows(f, zeta, u, p, ff, fr)          # the forces computed once per step
     vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
     df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]

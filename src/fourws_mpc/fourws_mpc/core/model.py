@@ -39,12 +39,16 @@ at the operating point (ζ0, u0)::
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
-from fourws_mpc.core.expm import expm
+from fourws_mpc.core.expm import expm, expm_compiled
 
 N_STATE = 6
 N_INPUT = 3
@@ -99,6 +103,16 @@ class ModelParams:
     track_width_m: float = 1.30
     tyre_shape_lateral: float = 1.3
     tyre_curvature_lateral: float = -1.0
+
+
+#: :class:`ModelParams` as the NamedTuple of floats the compiled kernels take, field for field
+ModelTuple = NamedTuple("ModelTuple", [(f.name, float) for f in dataclasses.fields(ModelParams)])
+
+
+@lru_cache(maxsize=64)
+def packed(p: ModelParams) -> ModelTuple:
+    """``p`` as a :data:`ModelTuple` (built once per parameter set)."""
+    return ModelTuple(*(float(getattr(p, name)) for name in ModelTuple._fields))
 
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
@@ -194,21 +208,31 @@ def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     return E[:n, :n], E[:n, n:]
 
 
+@njit(cache=True)
 def affine_euler(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
                  u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forward Euler of the linearisation at (ζ0, u0), eq. (4): A_k = I + T A_t,
-    B_k = T B_t, d_k = T (f0 − A_t ζ0 − B_t u0), exact at the operating point."""
+    B_k = T B_t, d_k = T (f0 − A_t ζ0 − B_t u0), exact at the operating point (compiled)."""
     Ak = dt_s * At
-    Ak.flat[::Ak.shape[0] + 1] += 1.0          # I + T A_t without building I
+    for i in range(Ak.shape[0]):
+        Ak[i, i] += 1.0
     return Ak, dt_s * Bt, dt_s * (f0 - At @ zeta0 - Bt @ u0)
 
 
+@njit(cache=True)
 def affine_zoh(f0: np.ndarray, At: np.ndarray, Bt: np.ndarray, zeta0: np.ndarray,
                u0: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-order hold of the same linearisation: the constant term
-    c = f0 − A_t ζ0 − B_t u0 is a held input, so d_k is its column of :func:`zoh`."""
-    Ad, Bd = zoh(At, np.column_stack([Bt, f0 - At @ zeta0 - Bt @ u0]), dt_s)
-    return Ad, Bd[:, :-1], Bd[:, -1].copy()
+    c = f0 − A_t ζ0 − B_t u0 is a held input, so d_k is its column of :func:`zoh`
+    (compiled: expm(T [[A_t, B_t, c], [0, 0, 0]]) in one kernel)."""
+    n, m = Bt.shape
+    M = np.zeros((n + m + 1, n + m + 1))
+    M[:n, :n] = dt_s * At
+    M[:n, n:n + m] = dt_s * Bt
+    M[:n, n + m] = dt_s * (f0 - At @ zeta0 - Bt @ u0)
+    E = expm_compiled(M)
+    return (np.ascontiguousarray(E[:n, :n]), np.ascontiguousarray(E[:n, n:n + m]),
+            np.ascontiguousarray(E[:n, n + m]))
 
 
 def discretise(

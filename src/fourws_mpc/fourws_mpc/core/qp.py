@@ -106,6 +106,10 @@ def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
     return Aa, Ba, da
 
 
+def _as_float(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
+
+
 def _clip(x: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
     """``np.clip`` for lo ≤ hi without its dispatch overhead (~8 µs a call on small arrays)."""
     return np.minimum(np.maximum(x, lo), hi)
@@ -273,17 +277,13 @@ class QpLayout:
         self._tiled_key: tuple | None = None
         self._tiled: tuple[np.ndarray, ...] = ()
 
-    def tiled(self, b: QpBounds
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(D, enabled, u_min, u_max, band) repeated over the horizon; cached while
-        unchanged."""
-        lower = b.lower()
-        key = (b.du_max.tobytes(), b.u_max.tobytes(), lower.tobytes(), b.enabled.tobytes(),
-               b.band_phi, b.band_y)
+    def tiled(self, b: QpBounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(D, enabled, band) repeated over the horizon; cached while unchanged (the input
+        levels' bounds, which the grip moves every step, go to ``constraints`` per input)."""
+        key = (b.du_max.tobytes(), b.enabled.tobytes(), b.band_phi, b.band_y)
         if key != self._tiled_key:
             self._tiled = (np.tile(b.du_max, self.n_c), np.tile(b.enabled.astype(float),
                                                                  self.n_c),
-                           np.tile(lower, self.n_c), np.tile(b.u_max, self.n_c),
                            np.tile([b.band_phi, b.band_y], self.n_p))
             self._tiled_key = key
         return self._tiled  # type: ignore[return-value]
@@ -389,7 +389,7 @@ class MpcQp:
         n = Ak.shape[0]
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
-        D, en, u_min_t, u_max_t, band = inst.tiled(bounds)
+        D, en, band = inst.tiled(bounds)
         if terminal_w is None:
             W, z_ref = _NO_TERMINAL, _ZERO_U
         else:
@@ -400,7 +400,8 @@ class MpcQp:
             lateral_rows(n), output_index(n), W, z_ref)
         qvec = np.concatenate([g, [0.0]])
         A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
-        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_min_t, u_max_t,
+        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en,
+                    _as_float(bounds.lower()), _as_float(bounds.u_max),
                     u_prev, band, float(bounds.vy_max), float(bounds.r_max),
                     bool(bounds.state_bounds), int(bounds.state_bounds_from_step),
                     float(bounds.state_softness))

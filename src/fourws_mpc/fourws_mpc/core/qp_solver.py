@@ -286,15 +286,14 @@ class DaqpSolver:
     def solve(self, qp: CondensedQp, warm_x: np.ndarray | None) -> QpResult:
         import daqp
 
+        f = np.ascontiguousarray
+        P, lo, hi, code = _daqp_data(f(qp.H, dtype=float), float(qp.slack_hessian),
+                                     f(qp.q, dtype=float), f(qp.A, dtype=float),
+                                     f(qp.lo, dtype=float), f(qp.hi, dtype=float), OSQP_INFTY,
+                                     DAQP_INF)
+        if code:
+            return QpResult(QpStatus.INVALID_DATA, f"invalid data: {_INVALID[code]}", None, 0)
         nz = qp.pattern.nz
-        P = np.zeros((nz, nz))
-        P[:-1, :-1] = 0.5 * (qp.H + qp.H.T)
-        P[-1, -1] = qp.slack_hessian
-        bad = invalid_data(qp.q, qp.lo, qp.hi, P, qp.A)
-        if bad:
-            return QpResult(QpStatus.INVALID_DATA, f"invalid data: {bad}", None, 0)
-        hi = np.minimum(qp.hi, DAQP_INF)
-        lo = np.maximum(qp.lo, -DAQP_INF)
         sense = np.zeros(len(hi), dtype=np.int32)
         # the pattern's leading identity rows go to DAQP as simple bounds on z (bounds
         # longer than A's rows: the first ones bound z), which it handles without a row
@@ -308,6 +307,22 @@ class DaqpSolver:
             x = None
         iters = int(info.get("iterations", 0)) if isinstance(info, dict) else 0
         return QpResult(status, _DAQP_TEXT.get(int(flag), f"exit flag {flag}"), x, iters)
+
+
+@njit(cache=True)
+def _daqp_data(H: np.ndarray, slack: float, q: np.ndarray, A: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray, infty: float, daqp_inf: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """DAQP's data in one compiled pass: P = blockdiag(½ (H + Hᵀ), slack), the bounds
+    clamped to ±``daqp_inf``, and :func:`_invalid_code` of the QP (0: valid)."""
+    nz = H.shape[0] + 1
+    P = np.zeros((nz, nz))
+    for i in range(nz - 1):
+        for j in range(nz - 1):
+            P[i, j] = 0.5 * (H[i, j] + H[j, i])
+    P[nz - 1, nz - 1] = slack
+    code = _invalid_code(q, P.ravel(), A.ravel(), lo, hi, infty)
+    return P, np.maximum(lo, -daqp_inf), np.minimum(hi, daqp_inf), code
 
 
 #: solver name (parameter ``qp_solver``) -> factory

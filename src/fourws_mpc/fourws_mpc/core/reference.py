@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from fourws_common.input_guard import check_reference
 from fourws_common.path_lookup import windowed_search
@@ -118,21 +119,7 @@ class Reference:
     def _project(self, px: float, py: float, lo: int, hi: int
                  ) -> tuple[int, float, float]:
         """Best segment in [lo, hi) → (index, t (unclipped at the path ends), signed offset)."""
-        x0, y0 = self.x[lo:hi], self.y[lo:hi]
-        dx, dy = self.x[lo + 1:hi + 1] - x0, self.y[lo + 1:hi + 1] - y0
-        L2 = dx * dx + dy * dy
-        rx, ry = px - x0, py - y0
-        t = np.minimum(np.maximum((rx * dx + ry * dy) / L2, 0.0), 1.0)
-        ex, ey = rx - t * dx, ry - t * dy
-        k = int(np.argmin(ex * ex + ey * ey))
-        i = lo + k
-        t_raw = (rx[k] * dx[k] + ry[k] * dy[k]) / L2[k]
-        tk = float(t[k])
-        nseg = len(self.x) - 1
-        if (i == 0 and t_raw < 0.0) or (i == nseg - 1 and t_raw > 1.0):
-            tk = float(t_raw)
-        off = float((dx[k] * ry[k] - dy[k] * rx[k]) / math.sqrt(L2[k]))
-        return i, tk, off
+        return _project(self.x, self.y, float(px), float(py), int(lo), int(hi))
 
     def nearest(self, px: float, py: float, hint: int | None = None) -> NearestPoint:
         """Projection of (px, py) on the path; ``hint`` is the previous index (the window
@@ -223,3 +210,27 @@ class Reference:
         c, s = math.cos(near.yaw), math.sin(near.yaw)
         dx, dy = px - near.x, py - near.y
         return c * dx + s * dy, -s * dx + c * dy, wrap_angle(yaw - near.yaw)
+
+
+@njit(cache=True)
+def _project(xs: np.ndarray, ys: np.ndarray, px: float, py: float, lo: int, hi: int
+             ) -> tuple[int, float, float]:
+    """:meth:`Reference._project`, compiled: the first segment of least distance wins."""
+    best, k = np.inf, lo
+    for i in range(lo, hi):
+        dx, dy = xs[i + 1] - xs[i], ys[i + 1] - ys[i]
+        rx, ry = px - xs[i], py - ys[i]
+        t = min(max((rx * dx + ry * dy) / (dx * dx + dy * dy), 0.0), 1.0)
+        ex, ey = rx - t * dx, ry - t * dy
+        d2 = ex * ex + ey * ey
+        if d2 < best:
+            best, k = d2, i
+    dx, dy = xs[k + 1] - xs[k], ys[k + 1] - ys[k]
+    rx, ry = px - xs[k], py - ys[k]
+    L2 = dx * dx + dy * dy
+    t_raw = (rx * dx + ry * dy) / L2
+    t = min(max(t_raw, 0.0), 1.0)
+    nseg = xs.shape[0] - 1
+    if (k == 0 and t_raw < 0.0) or (k == nseg - 1 and t_raw > 1.0):
+        t = t_raw
+    return k, t, (dx * ry - dy * rx) / math.sqrt(L2)

@@ -39,9 +39,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+from numba import njit
 
 from fourws_mpc.core.actuator_model import N_STATE_ACT, ActIdx
-from fourws_mpc.core.model import InputIdx, ModelParams, StateIdx
+from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, packed
 
 N_STATE_RELAX = N_STATE_ACT + 2
 N_INPUT = 3
@@ -54,7 +55,7 @@ class RelaxIdx(IntEnum):
     ALPHA_R = N_STATE_ACT + 1
 
 
-def _check(p: ModelParams) -> tuple[float, float]:
+def check(p: ModelParams) -> tuple[float, float]:
     sf, sr = p.relaxation_length_front_m, p.relaxation_length_rear_m
     if not (sf > 0.0 and sr > 0.0):
         raise ValueError("relaxation_length_front_m, relaxation_length_rear_m: must be > 0 "
@@ -73,8 +74,27 @@ def kinematic_slip(zeta: np.ndarray, p: ModelParams) -> tuple[float, float]:
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
     """f_t(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
+    check(p)
+    return dynamics_compiled(_vector(zeta), _vector(u), packed(p))
+
+
+def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact ``(f_t, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u), module docstring."""
+    check(p)
+    return jacobians_compiled(_vector(zeta), _vector(u), packed(p))
+
+
+def _vector(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
+
+
+@njit(cache=True)
+def dynamics_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple) -> np.ndarray:
+    """:func:`dynamics` on a :data:`~fourws_mpc.core.model.ModelTuple` (σ > 0 checked by
+    the caller), compiled."""
     S, A_, R_ = StateIdx, ActIdx, RelaxIdx
-    sf, sr = _check(p)
+    sf, sr = p.relaxation_length_front_m, p.relaxation_length_rear_m
     vy, vx, phi, r = zeta[S.VY], zeta[S.VX], zeta[S.PHI], zeta[S.R]
     df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]
     af, ar = zeta[R_.ALPHA_F], zeta[R_.ALPHA_R]
@@ -96,11 +116,12 @@ def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
     return out
 
 
-def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact ``(f_t, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u), module docstring."""
+@njit(cache=True)
+def jacobians_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`jacobians` on a :data:`~fourws_mpc.core.model.ModelTuple`, compiled."""
     S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
-    sf, sr = _check(p)
+    sf, sr = p.relaxation_length_front_m, p.relaxation_length_rear_m
     vy, vx, phi, r = zeta[S.VY], zeta[S.VX], zeta[S.PHI], zeta[S.R]
     df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]
     af, ar = zeta[R_.ALPHA_F], zeta[R_.ALPHA_R]
@@ -109,7 +130,7 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
     m, iz, a, b = p.mass_kg, p.yaw_inertia_kg_m2, p.a_m, p.b_m
     cf, cr = p.c_cf, p.c_cr
     tf, tr = p.steer_front_time_constant_s, p.steer_rear_time_constant_s
-    f = dynamics(zeta, u, p)
+    f = dynamics_compiled(zeta, u, p)
     A = np.zeros((N_STATE_RELAX, N_STATE_RELAX))
     B = np.zeros((N_STATE_RELAX, N_INPUT))
     k, kz = 2.0 / m, 2.0 / iz
@@ -133,13 +154,20 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
     A[A_.DF_ACT, A_.DF_ACT], B[A_.DF_ACT, I.DF] = -1.0 / tf, 1.0 / tf
     A[A_.DR_ACT, A_.DR_ACT], B[A_.DR_ACT, I.DR] = -1.0 / tr, 1.0 / tr
 
-    for row, sig, d, al, arm in ((R_.ALPHA_F, sf, df, af, a), (R_.ALPHA_R, sr, dr, ar, -b)):
-        A[row, S.VY] = -1.0 / sig
-        A[row, S.R] = -arm / sig
-        A[row, S.VX] = 0.0 if floored else (d - al) / sig
-        A[row, A_.DF_ACT if row == R_.ALPHA_F else A_.DR_ACT] = vxs / sig
-        A[row, row] = -vxs / sig
+    _slip_row(A, R_.ALPHA_F, A_.DF_ACT, sf, df, af, a, vxs, floored)
+    _slip_row(A, R_.ALPHA_R, A_.DR_ACT, sr, dr, ar, -b, vxs, floored)
     return f, A, B
+
+
+@njit(cache=True)
+def _slip_row(A: np.ndarray, row: int, act: int, sig: float, d: float, al: float,
+              arm: float, vxs: float, floored: bool) -> None:
+    """The row of α̇' of one axle (steering state ``act``, lever ``arm``: a, or −b)."""
+    A[row, StateIdx.VY] = -1.0 / sig
+    A[row, StateIdx.R] = -arm / sig
+    A[row, StateIdx.VX] = 0.0 if floored else (d - al) / sig
+    A[row, act] = vxs / sig
+    A[row, row] = -vxs / sig
 
 
 def hold_coefficients(dt_s: float, vx: float, sigma_m: float) -> tuple[float, float]:
@@ -184,7 +212,7 @@ class SlipObserver:
 
     def __init__(self, params: ModelParams) -> None:
         self.params = params
-        _check(params)
+        check(params)
 
     def estimate(self, zeta: np.ndarray, memory: ObserverMemory | None, dt_s: float
                  ) -> tuple[tuple[float, float], ObserverMemory]:

@@ -72,7 +72,14 @@ def output_index(n_state: int) -> np.ndarray:
 
 
 def _indices(n_state: int, enabled: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return lateral_rows(n_state), np.flatnonzero(enabled), output_index(n_state)
+    return _indices_of(n_state, np.asarray(enabled, dtype=bool).tobytes())
+
+
+@lru_cache(maxsize=32)
+def _indices_of(n_state: int, enabled: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    cols = np.flatnonzero(np.frombuffer(enabled, dtype=bool))
+    cols.flags.writeable = False
+    return lateral_rows(n_state), cols, output_index(n_state)
 
 
 def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
@@ -109,17 +116,16 @@ def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
     units). Raises ``np.linalg.LinAlgError`` or ``ValueError`` where the DARE has no
     stabilising solution (the caller then solves without a terminal cost).
     """
-    enabled = np.asarray(enabled, dtype=bool)
-    n_in = int(np.count_nonzero(enabled))
+    rows, cols, out = _indices(Ak.shape[0], enabled)
+    n_in = cols.shape[0]
     if n_in < len(OUTPUTS):
         raise ValueError(f"terminal cost: the velocity form needs as many inputs as outputs "
                          f"({len(OUTPUTS)}); {n_in} enabled leave a mode at 1 it cannot "
                          "steer (front steer alone: no terminal cost)")
     f = np.ascontiguousarray
-    W, ok = _terminal_weight(f(Ak, dtype=float), f(Bk, dtype=float),
-                             *_indices(Ak.shape[0], enabled), f(q_eff, dtype=float),
-                             f(np.asarray(r_eff, dtype=float)[enabled]), DARE_RTOL,
-                             DARE_MAX_STEPS)
+    W, ok = _terminal_weight(f(Ak, dtype=float), f(Bk, dtype=float), rows, cols, out,
+                             f(q_eff, dtype=float), f(np.asarray(r_eff, dtype=float)[cols]),
+                             DARE_RTOL, DARE_MAX_STEPS)
     if not ok:
         raise np.linalg.LinAlgError(_NO_SOLUTION)
     return W
