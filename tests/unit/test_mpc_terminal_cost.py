@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from fourws_mpc.core.cost_scaling import effective_weights
 from fourws_mpc.core.model import N_INPUT, StateIdx
 
 V = 60.0 / 3.6
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _straight_model(cfg: MpcConfig, vx: float = V):
@@ -253,3 +255,29 @@ def test_the_terminal_cost_keeps_a_soft_short_horizon_stable():
     without = spectral_radius(base, v, V)
     assert with_t < without
     assert with_t < 0.995 and math.isfinite(with_t)
+
+
+def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch):
+    """A run with a steady straight (the bench's 30 s lead-out): the controller reuses its
+    terminal weight on some steps, and every weight it used equals a DARE solved afresh on
+    that step's data to 1e-9 relative."""
+    from fourws_bringup.core.closed_loop import run_closed_loop
+
+    used = []
+    call = T.TerminalWeight.__call__
+
+    def record(self, Ak, Bk, enabled, q_eff, r_eff):
+        W = call(self, Ak, Bk, enabled, q_eff, r_eff)
+        used.append((Ak.copy(), Bk.copy(), np.array(enabled), np.array(q_eff, float),
+                     np.array(r_eff, float), W.copy(), self.reuses))
+        return W
+
+    monkeypatch.setattr(T.TerminalWeight, "__call__", record)
+    run_closed_loop(str(ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml"), "improved",
+                    max_steps=2500)
+    monkeypatch.undo()
+    reuses = used[-1][-1]
+    assert len(used) == 2500 and reuses > 100, f"{reuses} reuses in {len(used)} steps"
+    worst = max(np.max(np.abs(W - T.terminal_weight(Ak, Bk, en, q, r))) / np.max(np.abs(W))
+                for Ak, Bk, en, q, r, W, _ in used)
+    assert worst <= 1e-9

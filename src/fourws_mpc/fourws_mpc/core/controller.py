@@ -76,7 +76,7 @@ from fourws_mpc.core.prediction_model import PredictionModel, make_prediction_mo
 from fourws_mpc.core.qp import MpcQp, QpBounds, QpSolution, unconstrained_gain
 from fourws_mpc.core.qp_solver import QpSettings, QpSolver, QpStatus, make_qp_solver
 from fourws_mpc.core.reference import NearestPoint, Reference
-from fourws_mpc.core.terminal_cost import terminal_weight
+from fourws_mpc.core.terminal_cost import TerminalWeight
 
 G = 9.81
 #: appended to the solver status when the QP was solved without the hard state bounds
@@ -351,6 +351,7 @@ class MpcController:
         self._ref: Reference | None = None
         self.model_memory: Any = None
         self.grip_memory: GripMemory | None = None
+        self.terminal = TerminalWeight()
 
     def step(self, t_s: float, state: VehicleSample, ref: Reference, mu: float | None = None
              ) -> MpcResult:
@@ -509,7 +510,7 @@ class MpcController:
         terminal_w, note = None, ""
         if c.terminal_cost == "lqr":
             try:
-                terminal_w = terminal_weight(Ak, Bk, self._enabled, q_eff, r_eff)
+                terminal_w = self.terminal(Ak, Bk, self._enabled, q_eff, r_eff)
             except (ValueError, np.linalg.LinAlgError):
                 note = f", {TERMINAL_COST_SKIPPED}"
         return q_eff, r_eff, s_level, terminal_w, note
