@@ -245,12 +245,10 @@ def main() -> int:
         *(f"- {t}" for t in twins), *([] if twins else ["- none"]),
         "",
         "## The front-steer baseline against the textbook LQR",
-        "mpc_fws keeps the hard β and yaw-rate bounds of every MPC preset; lqr_ff has none. "
-        "For front steer alone a yaw-rate bound of 0.85 μg/v_x caps the lateral acceleration "
-        "below the friction limit: without the bounds mpc_fws matched lqr_ff on the 1.1 μg "
-        "rungs and ISO 3888-1 at 80 km/h (ideal: 0.15 against 1.99 m on μ 0.9), but the one "
-        "tuning procedure then chose another common scaling for every preset, so that is left "
-        "for a retune. Cases where lqr_ff stays clean and mpc_fws does not:",
+        "mpc_fws runs without the hard β and yaw-rate bounds (its preset says why: a "
+        "front-steer car cannot hold β and r apart, and the bounds capped its lateral "
+        "acceleration below the friction limit), as lqr_ff; every preset with rear steer "
+        "keeps them. Cases where lqr_ff stays clean and mpc_fws does not:",
         "",
         *fws_lines(by_case),
         "",

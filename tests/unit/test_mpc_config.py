@@ -64,26 +64,34 @@ def test_presets_load(name):
 
 def test_presets_share_one_cost_scaling_and_constraints():
     """The paper's presets differ only in their switches (the terminal cost is on wherever
-    there is rear steer); lqr_ff (another law) shares every
-    key but its own tuned Bryson maxima, the MPC cost it does not have and its delay
-    predictor (the steering lags without the tyre relaxation: its better margin)."""
+    there is rear steer) and, for the front-steer baseline, its own tuned scaling (its own
+    tuning group, as lqr_ff); lqr_ff (another law) shares every key but its own tuned Bryson
+    maxima, the MPC cost it does not have and its delay predictor (the steering lags without
+    the tyre relaxation: its better margin)."""
     switches = ("controller", "use_rear_steer", "use_dyc", "weights_mode", "horizons_mode",
-                "law", "terminal_cost", "prediction_model")
+                "law", "terminal_cost", "prediction_model", "state_bounds")
     shared = [f.name for f in dataclasses.fields(MpcConfig) if f.name not in switches]
     mpc = [_preset(n)[0] for n in PRESETS if n not in ("lqr_ff", "improved_np30")]
+    tuned = ("scale_y_m", "scale_phi_deg")
     for name in shared:
-        assert len({getattr(c, name) for c in mpc}) == 1, name
+        group = [c for c in mpc if c.use_rear_steer or name not in tuned]
+        assert len({getattr(c, name) for c in group}) == 1, name
     # beyond the paper: every preset that can take the LQR terminal cost does (front steer
     # alone cannot: MpcConfig refuses it)
     for c in mpc:
         assert c.terminal_cost == ("lqr" if c.use_rear_steer else "none"), c.controller
+    # the hard β and r bounds wherever there is rear steer; the front-steer baseline has
+    # none, as lqr_ff (deviation 20: they capped a front-steer car below the friction limit)
+    for c in mpc:
+        assert c.state_bounds == c.use_rear_steer, c.controller
     # beyond the paper: the adaptive presets predict with tyres that saturate at the
     # estimated grip; the conventional baselines keep the linear tyres (docs/limits.md)
     for c in mpc:
         assert c.prediction_model == ("single_track_friction" if c.weights_mode == "fuzzy"
                                       else "single_track_relaxation"), c.controller
     lqr = _preset("lqr_ff")[0]
-    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model"}
+    own = {"lqr_e1_max_m", "lqr_e2_max_deg", "scale_y_m", "scale_phi_deg", "prediction_model",
+           "state_bounds"}
     assert lqr.prediction_model == "single_track_actuators"
     for name in set(shared) - own:
         assert getattr(lqr, name) == getattr(mpc[0], name), name
