@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from fourws_mpc.core import delay as D
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.delay import (
@@ -171,3 +172,28 @@ def test_forward_euler_of_a_steering_lag_shorter_than_two_periods_is_refused():
                   steer_front_time_constant_s=0.015)
     MpcConfig(prediction_model="single_track_actuators", prediction_discretisation="zoh",
               steer_front_time_constant_s=0.015)
+
+
+def test_the_linear_form_of_the_delay_prediction_is_the_recursion():
+    """The margins' form (ζ and the registers as columns of a linear map) gives what the
+    controller computes from its buffer, for every split of the delay between channels."""
+    rng = np.random.default_rng(3)
+    n = 6
+    Ak, Bk = np.eye(n) + 0.05 * rng.standard_normal((n, n)), rng.standard_normal((n, 3))
+    for delays in ((1, 1, 1), (3, 3, 1), (2, 2, 0), (4, 4, 2)):
+        schedule = D.register_schedule(delays)
+        n_reg = max(delays)
+        buf = D.CommandBuffer(n_reg, np.zeros(3))
+        for _ in range(n_reg):
+            buf.push(rng.standard_normal(3))
+        zeta = rng.standard_normal(n)
+        direct = D.predict_over_delay(Ak, Bk, np.zeros(n), zeta, buf.applied(schedule))
+        # the map from x = [ζ; r_0; r_1; ...] to ζ(k + N_d)
+        m = n + 3 * n_reg
+        regs = np.zeros((n_reg, 3, m))
+        for i in range(n_reg):
+            regs[i, :, n + 3 * i:n + 3 * i + 3] = np.eye(3)
+        Z0 = np.hstack([np.eye(n), np.zeros((n, 3 * n_reg))])
+        M = D.predict_over_delay(Ak, Bk, np.zeros(n), Z0, D.applied_commands(regs, schedule))
+        x = np.concatenate([zeta, buf.registers.reshape(-1)])
+        np.testing.assert_allclose(M @ x, direct, rtol=1e-12, atol=1e-12)

@@ -59,7 +59,12 @@ import numpy as np
 
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MpcController
-from fourws_mpc.core.delay import channel_delays, register_schedule
+from fourws_mpc.core.delay import (
+    applied_commands,
+    channel_delays,
+    predict_over_delay,
+    register_schedule,
+)
 from fourws_mpc.core.lqr import ErrIdx, LqrLateral
 from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
@@ -213,11 +218,12 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
     # known delay with the commands it sent (as delay.predict_over_delay); both laws read it
     Zs = _zeta(n_model, n)
     obs_A = _observer(cfg, vx, n, i_obs, Zs) if n_obs else None
-    ch = np.arange(N_INPUT)
-    for regs in (register_schedule(known) if n_known else ()):
-        U = np.zeros((N_INPUT, n))
-        U[ch, i_mem + N_INPUT * regs + ch] = 1.0
-        Zs = Ak @ Zs + Bk @ U
+    if n_known:
+        registers = np.zeros((n_known, N_INPUT, n))   # register i: u(k−1−i) in the memory
+        for i in range(n_known):
+            registers[i, :, i_mem + N_INPUT * i:i_mem + N_INPUT * (i + 1)] = np.eye(N_INPUT)
+        Zs = predict_over_delay(Ak, Bk, np.zeros(n_model), Zs,
+                                applied_commands(registers, register_schedule(known)))
     # controller output u(k) = C_u x (3, n)
     C_u = np.zeros((N_INPUT, n))
     if cfg.law == "lqr_ff":

@@ -49,12 +49,21 @@ def register_schedule(delays: Sequence[int]) -> np.ndarray:
     return np.maximum(np.asarray(delays)[None, :] - j, 1) - 1
 
 
+def applied_commands(registers: np.ndarray, schedule: np.ndarray) -> np.ndarray:
+    """(N_d, 3, …): the command each channel receives at each step of the delay, from the
+    registers (register i = u(k − 1 − i)) and :func:`register_schedule`. Trailing axes ride
+    along: the stability margins pass each register as the rows of a linear map."""
+    return registers[schedule, np.arange(N_INPUT)[None, :]]
+
+
 def predict_over_delay(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, zeta: np.ndarray,
                        inputs: np.ndarray) -> np.ndarray:
-    """ζ after ``len(inputs)`` steps of eq. (4) with the given inputs (N_d, 3)."""
+    """ζ after ``len(inputs)`` steps of eq. (4) with the given inputs (N_d, 3); or, with ζ
+    (n, m) and inputs (N_d, 3, m), the same recursion on the columns of a linear map (the
+    stability margins' form, ``fourws_bringup.core.margins``; dk then zero)."""
     z = zeta
     for u in inputs:
-        z = Ak @ z + Bk @ u + dk
+        z = Ak @ z + Bk @ u + (dk if z.ndim == 1 else dk[:, None])
     return z
 
 
@@ -79,4 +88,4 @@ class CommandBuffer:
 
     def applied(self, schedule: np.ndarray) -> np.ndarray:
         """(N_d, 3): the command each channel receives at each step of the delay."""
-        return self.registers[schedule, np.arange(N_INPUT)[None, :]]
+        return applied_commands(self.registers, schedule)
