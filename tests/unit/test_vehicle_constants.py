@@ -16,12 +16,14 @@ from fourws_bringup.core.configs import (
     node_values,
 )
 from fourws_common.vehicle_info import (
+    VehicleInfo,
+    field_range,
     list_vehicles,
     load_vehicle_info,
     node_vehicle_values,
     read_vehicle_file,
 )
-from fourws_sim.core.vehicle_params import load_vehicle_params
+from fourws_sim.core.vehicle_params import VehicleParams, load_vehicle_params
 
 PLANT = read_vehicle_file()
 PARAMS = load_vehicle_params()
@@ -166,3 +168,13 @@ def test_one_control_period_for_plant_and_controllers():
     dt = plant_values()["dt_s"]
     assert load_mpc_config("improved").dt_s == dt
     assert DEADLINE_MS == pytest.approx(dt * 1e3)
+
+
+def test_the_plant_and_the_controllers_accept_the_same_range_of_every_shared_key():
+    """A car file that the controllers' VehicleInfo accepts, the plant accepts too: the
+    ranges of the keys both read have one owner (``vehicle_info.field_range``)."""
+    plant = {f.name: f.metadata for f in dataclasses.fields(VehicleParams)}
+    shared = [f.name for f in dataclasses.fields(VehicleInfo) if f.name in plant]
+    assert len(shared) >= 15
+    for name in shared:
+        assert {k: plant[name][k] for k in ("lo", "hi", "unit")} == field_range(name), name

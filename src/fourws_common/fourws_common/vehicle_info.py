@@ -45,10 +45,10 @@ class VehicleInfo:
     wheel_radius_m: float = _spec("effective rolling radius", lo=0.1, hi=1.0, unit="m")
     roll_stiffness_front_share: float = _spec("front share of roll stiffness", lo=0.0,
                                               hi=1.0, unit="1")
-    gravity_mps2: float = _spec("gravitational acceleration", lo=9.0, hi=10.5,
+    gravity_mps2: float = _spec("gravitational acceleration", lo=9.7, hi=9.9,
                                 unit="m/s^2")
-    tyre_shape_lateral: float = _spec("Magic Formula C_y", lo=1.0, hi=2.0, unit="1")
-    tyre_curvature_lateral: float = _spec("Magic Formula E_y", lo=-10.0, hi=1.0,
+    tyre_shape_lateral: float = _spec("Magic Formula C_y", lo=1.01, hi=1.99, unit="1")
+    tyre_curvature_lateral: float = _spec("Magic Formula E_y", lo=-10.0, hi=0.99,
                                           unit="1")
     cornering_stiffness_front_static_n_per_rad: float = _spec(
         "per-tyre cornering stiffness at static load, front (recorded)", lo=1000.0,
@@ -63,16 +63,16 @@ class VehicleInfo:
         "lateral relaxation length at static load, rear (recorded)", lo=0.0, hi=2.0,
         unit="m")
     motor_torque_max_nm: float = _spec("torque limit of each in-wheel motor", lo=1.0,
-                                       hi=10000.0, unit="N*m")
-    steer_front_time_constant_s: float = _spec("front steering lag", lo=0.0, hi=1.0,
+                                       hi=5000.0, unit="N*m")
+    steer_front_time_constant_s: float = _spec("front steering lag", lo=0.001, hi=1.0,
                                                unit="s")
-    steer_rear_time_constant_s: float = _spec("rear steering lag", lo=0.0, hi=1.0,
+    steer_rear_time_constant_s: float = _spec("rear steering lag", lo=0.001, hi=1.0,
                                               unit="s")
-    max_steer_front_deg: float = _spec("front road-wheel angle limit", lo=0.0, hi=60.0,
+    max_steer_front_deg: float = _spec("front road-wheel angle limit", lo=1.0, hi=60.0,
                                        unit="deg")
     max_steer_rear_deg: float = _spec("rear road-wheel angle limit", lo=0.0, hi=60.0,
                                       unit="deg")
-    slip_speed_min_mps: float = _spec("floor of a slip's speed denominator", lo=0.1, hi=20.0,
+    slip_speed_min_mps: float = _spec("floor of a slip's speed denominator", lo=0.1, hi=10.0,
                                       unit="m/s")
 
     @property
@@ -80,6 +80,13 @@ class VehicleInfo:
         """B = (B_f + B_r)/2: the one track of the single-track controllers and of the
         allocation's eq. (27)-(31), which take B_f = B_r."""
         return 0.5 * (self.track_width_front_m + self.track_width_rear_m)
+
+
+def field_range(name: str) -> dict[str, Any]:
+    """``lo``, ``hi`` and ``unit`` of the :class:`VehicleInfo` key ``name``: the one owner of
+    the ranges the plant's ``VehicleParams`` shares with the controllers."""
+    f = {f.name: f for f in dataclasses.fields(VehicleInfo)}[name]
+    return {k: f.metadata[k] for k in ("lo", "hi", "unit")}
 
 
 def vehicles_dir() -> Path:

@@ -54,6 +54,7 @@ or spins (``abort_sideslip_deg``); the reason is logged and published on ``/run/
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -121,11 +122,8 @@ class PlantNode(Node):
         self.sim = Simulator.from_scenario(self.scenario, substep_s=cfg.substep_s,
                                            steer_dead_time_s=cfg.steer_dead_time_s)
         self.sim.warm_up(cfg.dt_s)
-        self.sensors = sensors_from_params(
-            {f: getattr(cfg, f) for f in ("noise_sigma", "noise_tau_s", "noise_seed",
-                                          "delay_periods", "tyre_forces",
-                                          "localisation")},
-            cfg.dt_s, initial_command=((0.0, 0.0), np.zeros(4)))
+        self.sensors = sensors_from_params(dataclasses.asdict(cfg), cfg.dt_s,
+                                           initial_command=((0.0, 0.0), np.zeros(4)))
         self.dt_ns = int(round(cfg.dt_s * 1e9))
         self.step_k = 0
         self.done = False

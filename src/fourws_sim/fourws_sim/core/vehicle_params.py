@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from fourws_common.params import from_mapping, param
-from fourws_common.vehicle_info import read_vehicle_file, vehicle_path
+from fourws_common.vehicle_info import field_range, read_vehicle_file, vehicle_path
 from fourws_common.wheels import Wheel
 from fourws_sim.core.actuators import ActuatorLimits
 from fourws_sim.core.tyre import TyreCoefficients, cornering_stiffness
@@ -41,29 +41,30 @@ against the file's own inputs on load (:meth:`VehicleParams.recorded_values`).""
 class VehicleParams:
     """Vehicle, tyre and actuator parameters (SI, except the *_deg fields people edit)."""
 
-    mass_kg: float = param(750.0, "total vehicle mass (Table 5)", lo=100.0, hi=5000.0, unit="kg")
-    yaw_inertia_kg_m2: float = param(
-        750.0, "yaw moment of inertia about the CG (Table 5)", lo=10.0, hi=20000.0, unit="kg*m^2"
-    )
+    mass_kg: float = param(750.0, "total vehicle mass (Table 5)", **field_range("mass_kg"))
+    yaw_inertia_kg_m2: float = param(750.0, "yaw moment of inertia about the CG (Table 5)",
+                                     **field_range("yaw_inertia_kg_m2"))
     wheelbase_m: float = param(2.35, "wheelbase L (Table 5)", lo=0.5, hi=6.0, unit="m")
-    cg_to_front_axle_m: float = param(1.10, "CG to front axle a (Table 5)", lo=0.1, hi=5.0,
-                                      unit="m")
-    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b (Table 5)", lo=0.1, hi=5.0, unit="m")
-    cg_height_m: float = param(0.54, "CG height h (Table 5)", lo=0.0, hi=2.0, unit="m")
-    track_width_front_m: float = param(1.30, "front track width B_f", lo=0.5, hi=3.0, unit="m")
-    track_width_rear_m: float = param(1.30, "rear track width B_r", lo=0.5, hi=3.0, unit="m")
-    wheel_radius_m: float = param(0.27, "effective rolling radius (Table 5)", lo=0.1, hi=1.0,
-                                  unit="m")
+    cg_to_front_axle_m: float = param(1.10, "CG to front axle a (Table 5)",
+                                      **field_range("cg_to_front_axle_m"))
+    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b (Table 5)",
+                                     **field_range("cg_to_rear_axle_m"))
+    cg_height_m: float = param(0.54, "CG height h (Table 5)", **field_range("cg_height_m"))
+    track_width_front_m: float = param(1.30, "front track width B_f",
+                                       **field_range("track_width_front_m"))
+    track_width_rear_m: float = param(1.30, "rear track width B_r",
+                                      **field_range("track_width_rear_m"))
+    wheel_radius_m: float = param(0.27, "effective rolling radius (Table 5)",
+                                  **field_range("wheel_radius_m"))
     wheel_inertia_kg_m2: float = param(
         0.8, "spin inertia of wheel, tyre and motor rotor", lo=0.05, hi=20.0, unit="kg*m^2"
     )
-    roll_stiffness_front_share: float = param(
-        0.55, "front share of the total roll stiffness", lo=0.0, hi=1.0, unit="1"
-    )
+    roll_stiffness_front_share: float = param(0.55, "front share of the total roll stiffness",
+                                              **field_range("roll_stiffness_front_share"))
     load_transfer_time_constant_s: float = param(
         0.08, "lag of the accelerations that drive load transfer", lo=0.005, hi=1.0, unit="s"
     )
-    gravity_mps2: float = param(9.81, "gravitational acceleration", lo=9.7, hi=9.9, unit="m/s^2")
+    gravity_mps2: float = param(9.81, "gravitational acceleration", **field_range("gravity_mps2"))
     air_density_kg_m3: float = param(1.2, "air density", lo=0.0, hi=2.0, unit="kg/m^3")
     drag_coefficient: float = param(0.32, "aerodynamic drag coefficient c_d", lo=0.0, hi=2.0,
                                     unit="1")
@@ -94,8 +95,9 @@ class VehicleParams:
         0.0, "p_D2: peak friction falls by this fraction per F_z0 of load above F_z0",
         lo=-0.5, hi=0.0, unit="1",
     )
-    tyre_shape_lateral: float = param(1.3, "Magic Formula C_y", lo=1.01, hi=1.99, unit="1")
-    tyre_curvature_lateral: float = param(-1.0, "Magic Formula E_y", lo=-10.0, hi=0.99, unit="1")
+    tyre_shape_lateral: float = param(1.3, "Magic Formula C_y", **field_range("tyre_shape_lateral"))
+    tyre_curvature_lateral: float = param(-1.0, "Magic Formula E_y",
+                                          **field_range("tyre_curvature_lateral"))
     tyre_shape_longitudinal: float = param(1.65, "Magic Formula C_x", lo=1.01, hi=1.99, unit="1")
     tyre_curvature_longitudinal: float = param(0.0, "Magic Formula E_x", lo=-10.0, hi=0.99,
                                                unit="1")
@@ -106,24 +108,21 @@ class VehicleParams:
     tyre_relaxation_load_factor: float = param(
         2.5, "p_Ty2: the relaxation length peaks at F_z = p_Ty2 F_z0", lo=0.2, hi=10.0, unit="1"
     )
-    slip_speed_min_mps: float = param(
-        2.5, "floor of the slip denominators max(|v_x|, v_min)", lo=0.1, hi=10.0, unit="m/s"
-    )
+    slip_speed_min_mps: float = param(2.5, "floor of the slip denominators max(|v_x|, v_min)",
+                                      **field_range("slip_speed_min_mps"))
     motor_time_constant_s: float = param(
         0.02, "in-wheel motor tau of eq. (32) (Table 5)", lo=0.001, hi=1.0, unit="s"
     )
     motor_torque_max_nm: float = param(500.0, "in-wheel motor torque limit (each, +/-)",
-                                       lo=1.0, hi=5000.0, unit="N*m")
-    steer_front_time_constant_s: float = param(
-        0.02, "front steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
-    )
-    steer_rear_time_constant_s: float = param(
-        0.02, "rear steering actuator first-order lag", lo=0.001, hi=1.0, unit="s"
-    )
-    max_steer_front_deg: float = param(30.0, "front road-wheel angle limit (eq. 20)", lo=1.0,
-                                       hi=60.0, unit="deg")
-    max_steer_rear_deg: float = param(10.0, "rear road-wheel angle limit (eq. 20)", lo=0.0,
-                                      hi=60.0, unit="deg")
+                                       **field_range("motor_torque_max_nm"))
+    steer_front_time_constant_s: float = param(0.02, "front steering actuator first-order lag",
+                                               **field_range("steer_front_time_constant_s"))
+    steer_rear_time_constant_s: float = param(0.02, "rear steering actuator first-order lag",
+                                              **field_range("steer_rear_time_constant_s"))
+    max_steer_front_deg: float = param(30.0, "front road-wheel angle limit (eq. 20)",
+                                       **field_range("max_steer_front_deg"))
+    max_steer_rear_deg: float = param(10.0, "rear road-wheel angle limit (eq. 20)",
+                                      **field_range("max_steer_rear_deg"))
     max_steer_rate_front_deg_s: float = param(
         80.0, "front road-wheel angle rate limit", lo=1.0, hi=1000.0, unit="deg/s"
     )
