@@ -9,7 +9,7 @@ from fourws_sim.core.scenario import load_scenario
 from fourws_sim.core.simulator import Simulator
 from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
 
-P = EstimatorParams.from_mapping(read_vehicle_file())
+P = EstimatorParams.from_mapping({**read_vehicle_file(), "mu_nominal": 0.8})
 EST = TyreEstimator(P)
 
 

@@ -11,6 +11,7 @@ import pytest
 from fourws_bringup.core.standard_inputs import JointMap, controller_input, yaw_of
 from fourws_common.params import check_field, from_mapping, load_ros_params_yaml
 from fourws_common.resources import config_dir
+from fourws_common.vehicle_info import read_vehicle_file
 from fourws_common.wheels import JOINT_NAMES
 from fourws_torque_alloc.core.tyre_estimate import EstimatorParams, TyreEstimator
 
@@ -46,7 +47,8 @@ def test_joints_by_name_in_any_order_and_missing_ones_named():
 
 
 def test_controller_input_takes_what_is_measured_and_estimates_the_tyres():
-    est = TyreEstimator(EstimatorParams(mu_nominal=0.7))
+    est = TyreEstimator(EstimatorParams.from_mapping({**read_vehicle_file(),
+                                                      "mu_nominal": 0.7}))
     yaw = 0.2
     s = controller_input((10.0, -2.0, 0.0, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)),
                          (16.0, 0.3, 0.25), (0.2, 0.5, 3.0),
@@ -61,7 +63,7 @@ def test_controller_input_takes_what_is_measured_and_estimates_the_tyres():
     np.testing.assert_array_equal(s.fz, fz)
     np.testing.assert_array_equal(s.fy, fy)
     assert s.mu.tolist() == [0.7] * 4
-    p = EstimatorParams()
+    p = est.p
     assert s.fz.sum() == pytest.approx(p.mass_kg * p.gravity_mps2)   # loads carry the car
     assert s.fy.sum() == pytest.approx(p.mass_kg * 3.0)              # and its m a_y
     odom = controller_input((0, 0, 0, 0, 0, 0, 1), (1.0, 0.0, 0.4), (0.2, 0, 0),

@@ -165,7 +165,7 @@ def _speed_pid(v: VehicleInfo) -> dict[str, Any]:
 def _allocator(v: VehicleInfo) -> dict[str, Any]:
     same = ("wheel_radius_m", "motor_torque_max_nm", "mass_kg", "cg_to_front_axle_m",
             "cg_to_rear_axle_m", "cg_height_m", "roll_stiffness_front_share",
-            "slip_speed_min_mps")
+            "slip_speed_min_mps", "gravity_mps2")
     return {**{k: getattr(v, k) for k in same}, "track_width_m": v.track_width_m}
 
 

@@ -31,21 +31,25 @@ import numpy as np
 class EstimatorParams:
     """Nominal constants of the estimate (SI; names as in ``vehicle.yaml``)."""
 
-    mass_kg: float = 750.0
-    cg_to_front_axle_m: float = 1.10
-    cg_to_rear_axle_m: float = 1.25
-    cg_height_m: float = 0.54
-    track_width_front_m: float = 1.30
-    track_width_rear_m: float = 1.30
-    roll_stiffness_front_share: float = 0.55
-    gravity_mps2: float = 9.81
-    mu_nominal: float = 0.8
+    mass_kg: float
+    cg_to_front_axle_m: float
+    cg_to_rear_axle_m: float
+    cg_height_m: float
+    track_width_front_m: float
+    track_width_rear_m: float
+    roll_stiffness_front_share: float
+    gravity_mps2: float
+    mu_nominal: float
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> EstimatorParams:
-        """The fields found in ``values`` (e.g. vehicle.yaml), defaults for the rest."""
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: float(v) for k, v in values.items() if k in names})
+        """The fields from ``values`` (a car file's mapping and ``mu_nominal``); the car file
+        is their one owner, so a missing one is a ``ValueError`` naming it."""
+        names = [f.name for f in fields(cls)]
+        missing = [k for k in names if k not in values]
+        if missing:
+            raise ValueError(f"tyre estimate: missing {missing}")
+        return cls(**{k: float(values[k]) for k in names})
 
 
 class TyreEstimator:
@@ -99,7 +103,7 @@ class TyreData:
                 cg_to_rear_axle_m=cfg.cg_to_rear_axle_m, cg_height_m=cfg.cg_height_m,
                 track_width_front_m=cfg.track_width_m, track_width_rear_m=cfg.track_width_m,
                 roll_stiffness_front_share=cfg.roll_stiffness_front_share,
-                mu_nominal=cfg.mu_nominal))
+                gravity_mps2=cfg.gravity_mps2, mu_nominal=cfg.mu_nominal))
 
     def of(self, state: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(F_z (4,), F_y (4,), μ (4,)) for ``state`` (attributes fz, fy, mu or ax, ay)."""
