@@ -150,8 +150,8 @@ class AllocatorConfig:
     roll_stiffness_front_share: float = param(0.55, "estimated: front share of the roll "
                                               "stiffness (lateral load transfer split)",
                                               lo=0.0, hi=1.0)
-    gravity_mps2: float = param(9.81, "estimated: gravitational acceleration", lo=9.7,
-                                hi=9.9, unit="m/s^2")
+    gravity_mps2: float = param(9.81, "estimated: gravitational acceleration", lo=1.0,
+                                hi=20.0, unit="m/s^2")
     # the wheel-slip limiter after the allocation (core.slip_control): a car's ABS and TCS
     slip_control: bool = param(True, "scale a wheel's torque down once its slip passes "
                                "slip_ratio_on in the torque's direction (ABS, traction control)")
