@@ -32,7 +32,7 @@ from numba import njit
 from fourws_mpc.core import relaxation_model
 from fourws_mpc.core.actuator_model import ActIdx
 from fourws_mpc.core.axle_tyre import force
-from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, packed
+from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, as_vector, packed
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
 N_STATE_FRICTION = relaxation_model.N_STATE_RELAX
@@ -84,7 +84,7 @@ def _ellipse(mz: float, p: ModelTuple, mu: float, ax: float) -> tuple[float, flo
 def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
                 ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """((F, ∂F/∂α', ∂F/∂Mz) front, the same rear, ε) at ζ_t."""
-    return _axle_forces(_vector(zeta), float(mz), packed(p), float(g.mu), float(g.ax_mps2))
+    return _axle_forces(as_vector(zeta), float(mz), packed(p), float(g.mu), float(g.ax_mps2))
 
 
 @njit(cache=True)
@@ -124,7 +124,7 @@ def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelTuple,
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
     """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
     relaxation_model.check(p)
-    return _dynamics(_vector(zeta), _vector(u), packed(p), float(g.mu), float(g.ax_mps2))
+    return _dynamics(as_vector(zeta), as_vector(u), packed(p), float(g.mu), float(g.ax_mps2))
 
 
 def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
@@ -132,12 +132,9 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
     """Exact ``(f, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u): the relaxation model's rows of
     the positions, actuators and slips, and the tyre rows of the module docstring."""
     relaxation_model.check(p)
-    return jacobians_compiled(_vector(zeta), _vector(u), packed(p), float(g.mu),
+    return jacobians_compiled(as_vector(zeta), as_vector(u), packed(p), float(g.mu),
                               float(g.ax_mps2))
 
-
-def _vector(x: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(x, dtype=float)
 
 
 @njit(cache=True)

@@ -109,6 +109,11 @@ class ModelParams:
 ModelTuple = NamedTuple("ModelTuple", [(f.name, float) for f in dataclasses.fields(ModelParams)])
 
 
+def as_vector(x: np.ndarray) -> np.ndarray:
+    """``x`` as a contiguous float array (what the compiled kernels take)."""
+    return np.ascontiguousarray(x, dtype=float)
+
+
 @lru_cache(maxsize=64)
 def packed(p: ModelParams) -> ModelTuple:
     """``p`` as a :data:`ModelTuple` (built once per parameter set)."""

@@ -32,7 +32,15 @@ import numpy as np
 
 from fourws_common.params import choose
 from fourws_mpc.core import actuator_model, friction_model, relaxation_model
-from fourws_mpc.core.model import N_STATE, ModelParams, affine_euler, affine_zoh, jacobians
+from fourws_mpc.core.model import (
+    N_STATE,
+    ModelParams,
+    affine_euler,
+    affine_zoh,
+    as_vector,
+    jacobians,
+    packed,
+)
 
 __all__ = ["affine_euler", "affine_zoh"]  # the discretisations live in model.py
 
@@ -118,12 +126,15 @@ class SingleTrackRelaxationModel(_Discretised):
 
     def __init__(self, params: ModelParams, discretisation: str = "euler") -> None:
         super().__init__(params, discretisation)
-        self.observer = relaxation_model.SlipObserver(params)
+        self.observer = relaxation_model.SlipObserver(params)   # checks σ > 0
+        self._packed = packed(params)      # once: the kernels' form of the parameters
 
     def discretise(self, zeta: np.ndarray, u: np.ndarray, dt_s: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of the extended model, (10, 10), (10, 3), (10,)."""
-        return self._disc(*relaxation_model.jacobians(zeta, u, self.params), zeta, u, dt_s)
+        zeta, u = as_vector(zeta), as_vector(u)
+        return self._disc(*relaxation_model.jacobians_compiled(zeta, u, self._packed), zeta, u,
+                          dt_s)
 
     def measured_state(self, zeta: np.ndarray, steer_front: float, steer_rear: float,
                        memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
@@ -151,8 +162,10 @@ class SingleTrackFrictionModel(SingleTrackRelaxationModel):
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_k, B_k, d_k) of the friction-aware model at :attr:`grip`, (10, 10), (10, 3),
         (10,)."""
-        return self._disc(*friction_model.jacobians(zeta, u, self.params, self.grip), zeta,
-                          u, dt_s)
+        zeta, u = as_vector(zeta), as_vector(u)
+        g = self.grip
+        return self._disc(*friction_model.jacobians_compiled(
+            zeta, u, self._packed, float(g.mu), float(g.ax_mps2)), zeta, u, dt_s)
 
 
 #: the models whose state holds the transient slips α' (``relaxation_model.RelaxIdx``)

@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 
 from fourws_mpc.core.actuator_model import N_STATE_ACT, ActIdx
-from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, packed
+from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, as_vector, packed
 
 N_STATE_RELAX = N_STATE_ACT + 2
 N_INPUT = 3
@@ -75,18 +75,15 @@ def kinematic_slip(zeta: np.ndarray, p: ModelParams) -> tuple[float, float]:
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
     """f_t(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
     check(p)
-    return dynamics_compiled(_vector(zeta), _vector(u), packed(p))
+    return dynamics_compiled(as_vector(zeta), as_vector(u), packed(p))
 
 
 def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact ``(f_t, A_t (10, 10), B_t (10, 3))`` at (ζ_t, u), module docstring."""
     check(p)
-    return jacobians_compiled(_vector(zeta), _vector(u), packed(p))
+    return jacobians_compiled(as_vector(zeta), as_vector(u), packed(p))
 
-
-def _vector(x: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(x, dtype=float)
 
 
 @njit(cache=True)
