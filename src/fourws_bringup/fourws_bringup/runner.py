@@ -20,6 +20,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -136,11 +137,13 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
               extra_plant: dict | None = None, compose: str = "none",
               use_sim_time: bool = False, condition: Condition = IDEAL,
               namespace: str = "", domain_id: int | None = None,
-              via_adapter: bool = False, stream=sys.stderr) -> RunOutcome:
+              via_adapter: bool = False, stream=sys.stderr,
+              on_started: Callable[[], None] | None = None) -> RunOutcome:
     """Run one scenario over topics; the bag goes to ``out_dir/bag``. Returns the outcome.
 
     ``namespace``, ``via_adapter``: as in :func:`graph_specs`; ``domain_id``: run in this
-    ROS domain (default: a free one of this host, leased for the run)."""
+    ROS domain (default: a free one of this host, leased for the run); ``on_started``:
+    called once every node is in the graph (the caller's work that may overlap the run)."""
     bag_dir = out_dir / "bag" if record else None
     status_file = out_dir / "logs" / "plant_status.json"
     with contextlib.suppress(FileNotFoundError):
@@ -163,6 +166,8 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
         # first answered state to its end, start-up excluded. t0 only bounds the duration.
         monitor = _Monitor(domain, normalise_namespace(namespace))
         sup.start(timeout_s=60.0)
+        if on_started is not None:
+            on_started()
         t0 = time.monotonic()
         last_print = 0.0
         plant_proc = sup.procs[plant]

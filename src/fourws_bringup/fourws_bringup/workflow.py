@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from pathlib import Path
 
 from .core.conditions import IDEAL, Condition
@@ -57,9 +58,14 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         raise RunError(f"scenario '{scenario}': {why}") from exc
     prepare_out_dir(out_dir, force)
     print(f"[fourws] {controller} on {sc.name}: {sc.summary()}", file=sys.stderr)
+    prefetch = threading.Thread(target=_prefetch_scoring, args=(plots,), daemon=True,
+                                name="fourws-prefetch")
     outcome = run_graph(scenario, controller, out_dir, mode=mode, progress=progress,
                         compose=compose, condition=condition, namespace=namespace,
-                        domain_id=domain_id, via_adapter=via_adapter)
+                        domain_id=domain_id, via_adapter=via_adapter,
+                        on_started=prefetch.start)   # after the nodes' own start-up
+    if prefetch.ident is not None:         # started: the graph came up
+        prefetch.join()                    # before the figures fork: no thread mid-import
     from .bag.run_data import read_run
 
     run = None
@@ -100,6 +106,30 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
         except Exception as exc:  # noqa: BLE001
             print(f"[fourws] figures failed: {exc}", file=sys.stderr)
     return metrics
+
+
+def _prefetch_scoring(plots: bool) -> None:
+    """What scoring a bag needs, loaded while the graph runs (this process only watches it
+    then; started once the nodes are up, whose own imports it would slow): the bag reader, the limit metrics and their compiled path projection (numba's
+    first call in a process costs ~0.4 s), and matplotlib when figures are drawn. Only
+    imports and a throwaway projection: nothing a run records. A failure here is left to
+    the scoring after the run, which reports it."""
+    try:
+        import numpy as np
+
+        from fourws_mpc.core.reference import Reference
+
+        from .bag.run_data import read_run  # noqa: F401
+        from .core.limit_metrics import limit_metrics  # noqa: F401
+
+        x = np.linspace(0.0, 9.0, 10)
+        Reference.from_arrays(x, 0.0 * x, 0.0 * x, 0.0 * x, 1.0 + 0.0 * x).errors(1.0, 0.1, 0.0)
+        if plots:
+            from .report import _plt
+
+            _plt()
+    except Exception:  # noqa: BLE001, S110 - only a head start; scoring imports for itself
+        pass
 
 
 def report_path(path: Path, out: Path | None = None) -> dict:
