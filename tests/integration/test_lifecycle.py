@@ -98,7 +98,10 @@ def test_the_outcome_does_not_depend_on_the_monitor_hearing_the_plant(
         short_scenario, tmp_path, monkeypatch):
     monkeypatch.setattr(runner, "_Monitor", _DeafMonitor)
     out = tmp_path / "run"
-    outcome = runner.run_graph(str(short_scenario), CONTROLLER, out, progress=False)
+    started = []           # on_started: once, when the graph is up (fourws run's prefetch)
+    outcome = runner.run_graph(str(short_scenario), CONTROLLER, out, progress=False,
+                               on_started=lambda: started.append(out.joinpath("logs").is_dir()))
+    assert started == [True]
     assert outcome.completed and outcome.exit_code == 0 and outcome.died is None
     assert outcome.reason.startswith("end of scenario") and outcome.steps > 200
     m = score_run(out, outcome)

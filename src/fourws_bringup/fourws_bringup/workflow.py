@@ -109,11 +109,12 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
 
 
 def _prefetch_scoring(plots: bool) -> None:
-    """What scoring a bag needs, loaded while the graph runs (this process only watches it
-    then; started once the nodes are up, whose own imports it would slow): the bag reader, the limit metrics and their compiled path projection (numba's
-    first call in a process costs ~0.4 s), and matplotlib when figures are drawn. Only
-    imports and a throwaway projection: nothing a run records. A failure here is left to
-    the scoring after the run, which reports it."""
+    """What scoring a bag needs, loaded while the graph runs and this process only watches
+    it (started once the nodes are up, whose own imports it would slow): the bag reader, the
+    limit metrics and their compiled path projection (numba's first call in a process costs
+    ~0.4 s), and matplotlib when figures are drawn. Imports and a throwaway projection only:
+    nothing a run records. A failure is left to the scoring after the run, which reports it.
+    """
     try:
         import numpy as np
 
