@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from fourws_bringup.core.metrics import path_errors
+from fourws_bringup.core.metrics import path_nearest
 from fourws_common.wheels import Wheel
 
 #: a run spins when |β| reaches this (deg): beyond the ~5-7° where a car's rear saturates,
@@ -85,9 +85,9 @@ def limit_metrics(log: Any, track_m: float, radius_m: float) -> dict[str, Any]:
     with np.errstate(divide="ignore", invalid="ignore"):
         r_lim = np.where(vx > 1.0, mu * G / np.maximum(vx, 1.0), np.nan)
         ratio = r / r_lim
-    idx = [ref.errors(float(x), float(y), float(w)).near.index
-           for x, y, w in zip(s["x"], s["y"], s["yaw"], strict=True)] if len(vx) else []
-    v_ref = np.asarray(ref.speed, float)[idx] if idx else np.zeros(0)
+    e_y, _, idx = path_nearest(ref, s["x"], s["y"], s["yaw"])
+    e_y = np.abs(e_y)
+    v_ref = np.asarray(ref.speed, float)[idx]
     kappa = np.abs(np.asarray(ref.curvature, float))
     demand = kappa * np.asarray(ref.speed, float) ** 2
     mu_road = float(np.median(mu)) if len(mu) else math.nan
@@ -95,7 +95,6 @@ def limit_metrics(log: Any, track_m: float, radius_m: float) -> dict[str, Any]:
     wheels = np.asarray(log.wheel_torque_cmd_nm, float).reshape(-1, 4)
     unmet_mz = np.abs(mz_cmd - delivered_yaw_moment(wheels, track_m, radius_m))
     unmet_fx = np.abs(np.asarray(log.drive_torque_nm, float) - wheels.sum(axis=1)) / radius_m
-    e_y = np.abs(path_errors(ref, s["x"], s["y"], s["yaw"])[0]) if len(vx) else np.zeros(0)
     max_beta = float(np.max(beta)) if len(beta) else math.nan
     spin = bool(max_beta >= SPIN_SIDESLIP_DEG or "sideslip" in str(log.reason))
     xs, ys = (np.asarray(s[k], float) for k in ("x", "y"))

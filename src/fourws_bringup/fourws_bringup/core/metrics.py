@@ -1,9 +1,10 @@
 """Tracking metrics of a run (the metrics.json keys of docs/graph.md), from per-step arrays.
 
 Lateral and heading errors are measured against the reference path geometry by
-:func:`path_errors` — nearest point with projection between samples, signed lateral offset
-(left positive) and heading error wrapped to (−π, π] (``fourws_mpc.core.reference``) — so the
-in-process closed loop and a recorded bag give the same numbers from the same poses.
+:func:`path_errors` (:func:`path_nearest`) — nearest point with projection between samples,
+signed lateral offset (left positive) and heading error wrapped to (−π, π]
+(``fourws_mpc.core.reference``) — so the in-process closed loop and a recorded bag give the
+same numbers from the same poses.
 
 Definitions (n steps, errors e_k)::
 
@@ -52,7 +53,15 @@ def reference_from_arrays(x: Sequence[float], y: Sequence[float], yaw: Sequence[
 
 def path_errors(ref: Reference, x: Sequence[float], y: Sequence[float],
                 yaw: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """Lateral (m, left +) and heading (rad) errors of poses (n,) against the path (n,), (n,).
+    """Lateral (m, left +) and heading (rad) errors of poses (n,) against the path (n,), (n,):
+    the first two of :func:`path_nearest`."""
+    e_y, e_phi, _ = path_nearest(ref, x, y, yaw)
+    return e_y, e_phi
+
+
+def path_nearest(ref: Reference, x: Sequence[float], y: Sequence[float],
+                 yaw: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(e_Y (m, left +), e_φ (rad), index of the nearest segment) of poses (n,) each.
 
     Consecutive poses are searched in a window around the previous nearest index (global
     search on the first pose or when the window's edge is hit).
@@ -60,13 +69,14 @@ def path_errors(ref: Reference, x: Sequence[float], y: Sequence[float],
     xs, ys, yaws = (np.asarray(a, float).reshape(-1) for a in (x, y, yaw))
     e_y = np.empty(len(xs))
     e_phi = np.empty(len(xs))
+    index = np.empty(len(xs), dtype=np.int64)
     hint: int | None = None
     for k in range(len(xs)):
         e = ref.errors(float(xs[k]), float(ys[k]), float(yaws[k]), hint)
-        hint = e.near.index
+        hint = index[k] = e.near.index
         e_y[k] = e.lateral_error
         e_phi[k] = e.heading_error
-    return e_y, e_phi
+    return e_y, e_phi, index
 
 
 def _stats(e: np.ndarray) -> tuple[float, float, float]:
