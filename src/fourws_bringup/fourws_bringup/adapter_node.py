@@ -4,10 +4,11 @@ Subscribes ``vehicle/odom`` (nav_msgs/Odometry: pose in the map frame, twist in 
 frame as REP 105 has it), ``vehicle/imu`` (sensor_msgs/Imu: yaw rate, body accelerations) and
 ``vehicle/joint_states`` (sensor_msgs/JointState: steer angles as positions, wheel spin rates
 as velocities; the names are parameters) and publishes ``vehicle/state``
-(fourws_msgs/VehicleState), the one input of the MPC, the speed PID and the allocator. Tyre
-loads, lateral forces and adhesion, which no car measures, are estimated from the
-accelerations (:mod:`fourws_torque_alloc.core.tyre_estimate`, the realistic bench's
-estimator) on the nominal vehicle of ``vehicle_file``. All conversion is in
+(fourws_msgs/VehicleState), the one input of the MPC, the speed PID and the allocator
+(docs/controller-interface.md, "The adapter"). Tyre loads, lateral forces and adhesion, which
+no car measures, are estimated from the accelerations
+(:mod:`fourws_torque_alloc.core.tyre_estimate`, the realistic bench's estimator) on the
+nominal vehicle of ``vehicle_file``. All conversion is in
 :mod:`fourws_bringup.core.standard_inputs`; remap the topics to your car's
 (``-r vehicle/odom:=/my_car/odom``).
 

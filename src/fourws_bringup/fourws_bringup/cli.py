@@ -13,6 +13,10 @@
     fourws tune SPEC.yaml [--workers N] [--check] [--report FILE] [--presets DIR]
                 [--group NAME ...]
     fourws scenarios | fourws controllers
+
+Run and report: docs/graph.md, "Runs"; replay and recover: docs/bags.md, "Replay",
+"Recovery"; paper, margins, sweep and tune: docs/bench.md, "Tables 6-8", "Margins",
+"Sweeps", "Tuning".
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ ros2/examples' ``examples_rclpy_executors/composed.py`` behind a command line.
 
 ``fourws run --compose control`` hosts the MPC, the speed PID and the allocator here (the plant
 stays a process of its own, as a real car's interface would); ``--compose all`` hosts the
-plant too. The recorder always keeps its own process. Results are the same bit for bit
-(lockstep answers are keyed by the state stamp); only the timing changes.
+plant too (docs/graph.md, "Processes"). The recorder always keeps its own process. Results are
+the same bit for bit (lockstep answers are keyed by the state stamp); only the timing changes.
 """
 
 from __future__ import annotations

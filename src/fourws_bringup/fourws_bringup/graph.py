@@ -1,6 +1,8 @@
-"""The node table of a run: which processes, with which params files, parameters,
-namespaces and clocks (``graph_specs``, ``control_specs``); used by ``fourws run``, the launch
-files and the tests, so they start the same graph (docs/graph.md).
+"""The node table of a run (docs/graph.md, "Runs", "Launch").
+
+Which processes, with which params files, parameters, namespaces and clocks (``graph_specs``,
+``control_specs``); used by ``fourws run``, the launch files and the tests, so they start the
+same graph.
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
 """Raw subscriptions taken with their DDS message info, on a thread of their own.
 
 rosbag2 writes a message's ``publish_time`` from the middleware's message info (the
-publisher's send time, ``source_timestamp``) and rclpy hands that info to a callback only
-under its Python executors; Jazzy's ``EventsExecutor``, which the fourws nodes spin (it keeps
-up at 100 Hz on two loaded cores, the single-threaded executor does not), calls a two-argument
-callback with a null argument. So the recorder's subscriptions are kept out of the
-executor: :class:`InfoTaker` waits on them in an rcl wait set (``rclpy``'s own
+publisher's send time, ``source_timestamp``; docs/bags.md, "Layout") and rclpy hands that info
+to a callback only under its Python executors; Jazzy's ``EventsExecutor``, which the fourws
+nodes spin (it keeps up at 100 Hz on two loaded cores, the single-threaded executor does not),
+calls a two-argument callback with a null argument. So the recorder's subscriptions are kept
+out of the executor: :class:`InfoTaker` waits on them in an rcl wait set (``rclpy``'s own
 ``wait_for_message`` does the same; the wait releases the GIL) and takes every ready
 message, serialized, with its info, in a batch.
 

@@ -1,7 +1,9 @@
-"""Launch descriptions of fourws (``ros2 launch fourws_bringup fourws.launch.py``), built from
-the node table of ``fourws run`` (:func:`fourws_bringup.graph.graph_specs` and
-:func:`~fourws_bringup.graph.control_specs`), so the two cannot drift: the same nodes,
-parameter files, parameters, namespaces and process layouts.
+"""Launch descriptions of fourws from the node table of ``fourws run`` (docs/graph.md, "Launch").
+
+``ros2 launch fourws_bringup fourws.launch.py`` and ``fourws run`` share that table
+(:func:`fourws_bringup.graph.graph_specs` and :func:`~fourws_bringup.graph.control_specs`),
+so the two cannot drift: the same nodes, parameter files, parameters, namespaces and process
+layouts.
 
 Each :class:`~fourws_bringup.supervisor.NodeSpec` becomes one ``launch_ros.actions.Node``
 with the spec's own ``--ros-args`` (:meth:`NodeSpec.ros_arguments`). ``fourws.launch.py``

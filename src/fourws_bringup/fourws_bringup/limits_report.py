@@ -1,6 +1,6 @@
 """The limit bench's report (docs/limits.md) from its sweep rows: pure tables, no plots.
 
-Rules, stated once and printed in the report:
+Rules, stated once and printed in the report (docs/limits.md, "Metrics and rules"):
 
 * a **case** is one scenario under one condition for one controller; it is **clean** when
   every seed's run completed without a spin and without a cone or lane violation

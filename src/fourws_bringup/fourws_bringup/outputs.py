@@ -1,9 +1,9 @@
 """A run's output folder and the errors of a run that cannot start or cannot be written.
 
-A folder is made writable for a run (``prepare_out_dir``), its kind is told from its content
-(``run_folder_problem``), and an ``OSError`` becomes one line (``output_error``): a full disk
-is exit code 1, anything else a bad argument, 2 (docs/graph.md, "Lifecycle and bad
-input").
+A folder is made writable for a run (``prepare_out_dir``; docs/graph.md, "Runs"), its kind is
+told from its content (``run_folder_problem``), and an ``OSError`` becomes one line
+(``output_error``): a full disk is exit code 1, anything else a bad argument, 2
+(docs/graph.md, "Lifecycle and bad input").
 """
 
 from __future__ import annotations

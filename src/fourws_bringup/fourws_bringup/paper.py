@@ -1,9 +1,10 @@
 """Reproduce the paper's evidence: runs, metrics from bags, Tables 6-8, report.md.
 
 Only the paper's side: its printed tables (Tables 6-8), the eight configurations, the ranking
-of each table beside the paper's, the allocation note and ``fourws paper``. Every number is
-computed from a recorded bag by ``scoring.score_run`` (the same code ``fourws run`` and
-``fourws report`` use), so any table can be regenerated from the bags alone.
+of each table beside the paper's, the allocation note and ``fourws paper`` (docs/bench.md,
+"Tables 6-8"). Every number is computed from a recorded bag by ``scoring.score_run`` (the same
+code ``fourws run`` and ``fourws report`` use), so any table can be regenerated from the bags
+alone.
 
 Two conditions (:data:`CONDITIONS`): **ideal**, the paper's setting (the controllers see the truth,
 commands act at once, tyre forces known), and **realistic**, the shipped condition

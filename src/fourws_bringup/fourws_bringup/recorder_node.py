@@ -1,54 +1,34 @@
 """Recorder node: every topic of the graph, serialized as received, into a rosbag2-layout MCAP bag.
 
-Subscribes to each topic in ``topics`` (graph topics by the table's names,
-``/vehicle/state``; resolved in the recorder's namespace, so ``-r __ns:=/car1`` records
-``/car1/vehicle/state``, as the bag then names it) with ``raw=True`` (no decode, no
-re-encode) and the QoS its publisher offers (the topic table's QoS kind,
-``fourws_common.topics``: control per step, latched for ``/reference/*`` and
-``/run/status``, clock for ``/clock``, diagnostics for ``/diagnostics``), and appends every
-message to ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`, with
-rosbag2's log time: ``log_time`` = receive time on the node's clock (with ``use_sim_time``,
-as ``ros2 bag record --use-sim-time``: ``fourws run`` sets it in lockstep, so ``ros2 bag
-play`` replays the run at the simulated rate). ``publish_time`` is the publisher's send time and
-``sequence`` the publisher's sequence number, both from DDS's message info, as rosbag2 writes
-them: the recorder's subscriptions are taken on a thread of their own
-(:mod:`fourws_bringup.info_taker`; rclpy's EventsExecutor cannot hand message info to a
-callback). ``custom_data`` in ``metadata.yaml`` (and in its copy inside the MCAP) says which
-(``fourws_log_time``: ``ros_time`` or ``sim_time``; ``fourws_publish_time``: ``send_time``), so
-readers tell these bags from older ones (``wall_receive_time``; before that, header stamps as
-publish times).
+Subscribes to each topic in ``topics`` (docs/bags.md, "Recording"), resolved in the recorder's
+namespace (``-r __ns:=/car1`` records ``/car1/vehicle/state``), with ``raw=True`` and the QoS
+its publisher offers (the topic table's QoS kind, ``fourws_common.topics``), and appends every
+message to ``output_dir`` through :class:`fourws_bringup.bag.writer.BagWriter`. Times as
+rosbag2 writes them (docs/bags.md, "Layout"): ``log_time`` the receive time on the node's clock
+(simulated under ``use_sim_time``), ``publish_time`` and ``sequence`` from DDS's message info,
+taken on a thread of their own (:mod:`fourws_bringup.info_taker`); ``custom_data`` in
+``metadata.yaml`` says which.
 
-Durability: the file is written chunk by chunk (``chunk_size_bytes`` of uncompressed
-messages, or ``chunk_max_span_s`` of log time, whichever comes first; zstd) and flushed
-after each chunk, and ``metadata.yaml`` is rewritten with the counts that are on disk, so a
-killed recorder loses at most the open chunk and leaves a recognisable bag (``fourws bag
-recover`` makes its MCAP whole again).
+Durability: chunks of ``chunk_size_bytes`` of uncompressed messages or ``chunk_max_span_s`` of
+log time, whichever comes first (zstd), each flushed, and ``metadata.yaml`` rewritten with the
+counts on disk, so a killed recorder loses at most the open chunk (``fourws bag recover`` makes
+its MCAP whole again).
 
-Start gate (``start_gate_topic``, /vehicle/state in ``fourws run``): that topic is
-subscribed to last, once every other recorded per-step topic has a matched publisher and
-``start_gate_settle_s`` more has passed (the recorder sees a match before the publisher has
-matched it back), or after ``start_gate_timeout_s`` with a warning naming the unmatched
-topics. A lockstep plant holds its first state until /vehicle/state has all its
-subscribers, so the graph cannot start before the recorder takes every node's first
-message. Measured on a slow machine: without the gate a bag lost the MPC's first 35
-commands, with the gate and no settle time its first 4.
+Start gate (``start_gate_topic``): that topic is subscribed to last, once every other recorded
+per-step topic has a matched publisher and ``start_gate_settle_s`` more has passed (the
+recorder sees a match before the publisher has matched it back), or after
+``start_gate_timeout_s`` with a warning naming the unmatched topics.
 
-Loss count (the ``LOST`` of the closing log line): per per-step topic of the graph, the
-step stamps missing between consecutive received stamps (:class:`StampGaps`; the step period
-is the smallest stamp difference seen on any of them), or DDS's message-lost count when
-that is larger. DDS's count alone under-reports: samples a full keep-last queue drops need
-not raise the event (a run missing 1965 messages was reported as 1 lost).
+Loss count (``LOST`` in the closing log line): per per-step topic, the step stamps missing
+between consecutive received stamps (:class:`StampGaps`; the step period is the smallest stamp
+difference seen on any of them), or DDS's message-lost count when that is larger.
 
-Stopping: SIGINT and SIGTERM request a stop; the node keeps taking messages until none has
-arrived for ``drain_quiet_s`` *and* no writer is left matched on a per-step topic (at most
-``drain_max_s``), or, at once, until no writer is left matched on any recorded topic (the
-supervisor stops the recorder after every node it records: nothing more can come), then
-ends, and ``destroy_node`` takes what is still queued (:meth:`InfoTaker.stop`),
-finalises the file (last chunk, summary, footer) and writes the final ``metadata.yaml``,
-exactly once (also when rclpy shuts down first). A writer stopped at the same time
-(``ros2 launch`` signals every process at once) waits for its last samples to be
-acknowledged before it leaves (``fourws_common.node_main``), re-sending what the loopback
-lost; the recorder stays for them while it sees the writer.
+Stopping: on SIGINT or SIGTERM the node keeps taking messages until none has arrived for
+``drain_quiet_s`` *and* no writer is left matched on a per-step topic (at most
+``drain_max_s``), or at once when no writer is left matched on any recorded topic; then
+``destroy_node`` takes what is still queued (:meth:`InfoTaker.stop`), finalises the file (last
+chunk, summary, footer) and writes the final ``metadata.yaml``, exactly once (also when rclpy
+shuts down first).
 """
 
 from __future__ import annotations

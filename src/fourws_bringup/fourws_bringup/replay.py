@@ -1,4 +1,7 @@
-"""``fourws replay``: start replay_node on a bag in the current (or given) ROS domain."""
+"""``fourws replay``: start replay_node on a bag in the current (or given) ROS domain.
+
+The replay is described in docs/bags.md, "Replay".
+"""
 
 from __future__ import annotations
 

@@ -1,23 +1,23 @@
 """Replay node: publish a recorded bag's serialized messages again, in recorded order, with /clock.
 
 Each replayed topic gets a publisher of its recorded type and offered QoS (latched topics stay
-transient_local), and its recorded CDR bytes are published as they are (``publish(bytes)``).
-``/clock`` is published from the header stamps of the per-step topics (the run's simulated
-time; /diagnostics and the like carry the nodes' own clock): before each such message whose
-stamp is later than every stamp so far, i.e. once per simulated step. A stamp more than the
-nodes' jump limit away from the newest (a stray) neither paces nor clocks.
+transient_local), and its recorded CDR bytes are published as they are (``publish(bytes)``;
+docs/bags.md, "Replay"). ``/clock`` is published from the header stamps of the per-step topics
+(the run's simulated time; /diagnostics and the like carry the nodes' own clock): before each
+such message whose stamp is later than every stamp so far, i.e. once per simulated step. A
+stamp more than the nodes' jump limit away from the newest (a stray) neither paces nor clocks.
 
 Timing: with ``pacing: stamp`` a message is due at ``t0 + (s - s0) / rate``, ``s`` the
 largest header stamp so far (simulated time, so ``rate: 1`` is real time); with
 ``pacing: recorded`` the recorded receive times are used instead. ``rate: 0`` publishes as
 fast as possible: a subscriber slower than that loses the oldest messages beyond its KEEP_LAST
-depth (1000 on the per-step topics), as with ``ros2 bag play``; use ``lockstep_topic`` to replay
-at the pace of a controller instead.
+depth (1000 on the per-step topics); use ``lockstep_topic`` to replay at the pace of a
+controller instead.
 
 Lockstep (``lockstep_topic``, e.g. ``/control/mpc_command``): after publishing a
 ``lockstep_trigger`` message (``/vehicle/state``) stamped k, nothing more is published until a
 message stamped k arrives on ``lockstep_topic`` (or ``lockstep_timeout_s`` passes, which is
-logged and counted), so a live controller re-simulates deterministically against the bag.
+logged and counted).
 
 Start: optionally wait until every replayed topic has a subscriber (and, in lockstep, the
 lockstep topic a publisher), at most ``wait_timeout_s``, then ``start_delay_s``. End: after

@@ -1,6 +1,6 @@
 """Figures and Markdown pieces of a run report, from recorded runs (:class:`bag.run_data.RunData`).
 
-Figures (matplotlib, Agg, PNG), as in the paper:
+Figures (matplotlib, Agg, PNG; docs/graph.md, "Runs"), as in the paper:
 
 - Figures 5 and 7: (a) trajectory against the reference, (b) lateral error, (c) heading error,
   (d) heading with the reference heading, (e) sideslip angle, (f) yaw rate; one PNG each and

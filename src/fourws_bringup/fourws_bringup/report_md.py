@@ -1,4 +1,7 @@
-"""Write ``report.md`` for ``fourws paper``: tables beside the paper's, figures, run facts."""
+"""Write ``report.md`` for ``fourws paper``: tables beside the paper's, figures, run facts.
+
+``fourws paper`` and its report are described in docs/bench.md, "Tables 6-8".
+"""
 
 from __future__ import annotations
 

@@ -4,13 +4,14 @@
 as separate processes with the supervisor (their package YAML plus the controller preset as
 ``--params-file``), shows simulated time as it goes, waits for the plant to end the scenario,
 stops the graph cleanly and writes ``out_dir/metrics.json`` computed from the recorded bag
-alone (the same code as ``fourws report``) plus ``out_dir/plots/``. A node that dies stops
-the run; the bag is kept and metrics.json says which node died and its last error line.
+alone (the same code as ``fourws report``) plus ``out_dir/plots/`` (docs/graph.md, "Runs"). A
+node that dies stops the run; the bag is kept and metrics.json says which node died and its
+last error line.
 
 The outcome of a run comes from two records that do not depend on DDS timing: the plant's
 exit status (:class:`fourws_common.exit_codes.ExitCode`: completed, aborted, timeout) and the
-final status JSON it writes to ``logs/plant_status.json`` before it exits. The /run/status
-monitor only shows progress.
+final status JSON it writes to ``logs/plant_status.json`` before it exits (docs/graph.md,
+"Lifecycle and bad input"). The /run/status monitor only shows progress.
 """
 
 from __future__ import annotations

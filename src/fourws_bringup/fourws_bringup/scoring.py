@@ -1,12 +1,12 @@
 """Scoring: the content of a run's metrics.json, from its bag (and what the live run knows).
 
-The one module that assembles metrics.json. :func:`score_run` reads a bag
-(``bag.run_data.read_run``) and combines :func:`bag_metrics` (the tracking metrics of Tables
-6-8 from ``core.metrics`` on the recorded poses and path, plus what the record says about the
-run itself: deadline misses, fallbacks, horizon ranges, missing and stray steps, rejections,
-step latencies) with the plant's final status and the live outcome. metrics.json is strict
-JSON (:func:`metrics_json`). ``fourws run``, ``fourws report``, ``fourws paper``, the reference
-bags and the tools all score through here; the in-process loop uses the same
+The one module that assembles metrics.json (docs/graph.md, "Runs"). :func:`score_run` reads a
+bag (``bag.run_data.read_run``) and combines :func:`bag_metrics` (the tracking metrics of
+Tables 6-8 from ``core.metrics`` on the recorded poses and path, plus what the record says
+about the run itself: deadline misses, fallbacks, horizon ranges, missing and stray steps,
+rejections, step latencies) with the plant's final status and the live outcome. metrics.json
+is strict JSON (:func:`metrics_json`). ``fourws run``, ``fourws report``, ``fourws paper``, the
+reference bags and the tools all score through here; the in-process loop uses the same
 ``core.metrics.run_metrics``.
 """
 

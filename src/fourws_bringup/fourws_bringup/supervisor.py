@@ -11,21 +11,18 @@ remappings. All nodes of a graph share one ``ROS_DOMAIN_ID`` with discovery kept
 - :meth:`Supervisor.check` raises :class:`NodeDied` naming a node that exited with a code
   outside its spec's ``end_codes`` (default: only 0), with the exit code, its last error line
   and last log lines. A process that exits with one of its ``end_codes`` has *ended*, not
-  died (the plant at the end of a scenario: completed, aborted or timed out); it is no longer
-  waited for in the graph, and :meth:`Supervisor.ended` lists it.
+  died (docs/graph.md, "Lifecycle and bad input"); it is no longer waited for in the graph,
+  and :meth:`Supervisor.ended` lists it.
 - :meth:`Supervisor.stop` sends SIGINT, then SIGTERM and SIGKILL after timeouts, to every
   process group, in stages: a spec's ``stop_stage`` orders them (the recorder stops after
-  the nodes it records, so every reliable sample they sent can still be re-sent to it and
-  acknowledged while they exit; see ``fourws_common.node_main``). Children also get
-  ``PR_SET_PDEATHSIG`` so none outlives a killed supervisor.
+  the nodes it records). Children also get ``PR_SET_PDEATHSIG`` so none outlives a killed
+  supervisor.
 
 Every node gets the Fast DDS profiles of ``fourws_bringup/config/fastdds_profiles.xml``
-(:func:`dds_environment`, unless the environment names a profiles file of its own): more
-participant announcements, so two processes do not miss each other until the next periodic
-one (3 s by default), and a 100 ms heartbeat for reliable writers, so waiting for a last
-sample's acknowledgement at the end of a run or at a stop takes milliseconds instead of
-1.5 s on average (the file says why). Every node also gets ``FOURWS_FAST_EXIT=1``: it ends
-with ``os._exit`` once its clean-up is done (:mod:`fourws_common.node_main`).
+(:func:`dds_environment`, unless the environment names a profiles file of its own: more
+participant announcements, a 100 ms heartbeat for reliable writers) and
+``FOURWS_FAST_EXIT=1``: it ends with ``os._exit`` once its clean-up is done
+(:mod:`fourws_common.node_main`; docs/graph.md, "Timing").
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
-"""``fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler ADDRESS]``: controllers ×
-scenarios × conditions × seeds in the in-process loop, in parallel, one CSV row per run and a
-summary.
+"""Runs controllers × scenarios × conditions × seeds in the in-process loop, in parallel.
+
+``fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler ADDRESS]`` (docs/bench.md,
+"Sweeps"): one CSV row per run and a summary.
 
 Where one machine is not enough, ``--scheduler tcp://HOST:8786`` runs the same jobs on a
 `Dask distributed <https://distributed.dask.org>`_ cluster (``dask scheduler`` on one host,

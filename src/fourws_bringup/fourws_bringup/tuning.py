@@ -1,28 +1,26 @@
-"""``fourws tune SPEC.yaml [--workers N] [--check]``: one written tuning procedure for every
-controller, whose output is the shipped preset YAML (``docs/bench.md``, "Tuning").
+"""``fourws tune``: one written tuning procedure for every controller, into the preset YAML.
 
-The procedure, the same for every group of controllers (the spec's ``groups``):
+``fourws tune SPEC.yaml [--workers N] [--check]`` (docs/bench.md, "Tuning", "The procedure"),
+the same for every group of controllers (the spec's ``groups``):
 
-1. **Candidates.** Each group names two free parameters (the MPC presets: the common output
-   scaling ``scale_y_m``, ``scale_phi_deg``; ``lqr_ff``: Bryson's maxima ``lqr_e1_max_m``,
-   ``lqr_e2_max_deg``). A candidate multiplies the package defaults (``mpc.yaml``, never a
-   previous result, so a rerun does not drift) by 2^(i/2) and 2^(j/2) for i, j in the spec's
-   ``grid_exponents``: the same grid, so the same budget, for every group.
-2. **Margin.** A candidate is kept only if every controller of the group has a spectral radius
-   ρ ≤ ``max_spectral_radius`` (``core.margins``) at every speed of ``margin.speeds_kmh`` in
-   every condition of ``margin.conditions`` (its delay and dead time, which the controller is told
-   of: it compensates them). A group with no kept candidate is an error, not a silent default.
-3. **Closed loop.** Every kept candidate of a group runs every controller of the group on every
-   tuning scenario under every tuning condition and seed (the in-process loop of
-   ``fourws sweep``; scenarios and conditions disjoint from the reported ones). A controller's
-   score is its worst max |e_Y| (on the truth) over those runs, infinite if one aborts; the
-   candidate's score is the worst over the group's controllers (one common scaling).
-   Evaluated with exact pruning (:func:`tune`): a candidate whose runs so far are already
-   worse than the best complete candidate is abandoned; the choice is a full evaluation's.
+1. **Candidates.** Each group's two free parameters (the MPC presets' ``scale_y_m``,
+   ``scale_phi_deg``; ``lqr_ff``'s ``lqr_e1_max_m``, ``lqr_e2_max_deg``): the package defaults
+   (``mpc.yaml``, never a previous result) times 2^(i/2) and 2^(j/2), i, j in the spec's
+   ``grid_exponents``.
+2. **Margin.** A candidate is kept only if every controller of the group has ρ ≤
+   ``max_spectral_radius`` (``core.margins``) at every speed of ``margin.speeds_kmh`` in every
+   condition of ``margin.conditions`` (its delay and dead time told to the controller). A
+   group with no kept candidate is an error, not a silent default.
+3. **Closed loop.** Every kept candidate runs every controller of the group on every tuning
+   scenario under every tuning condition and seed (the in-process loop of ``fourws sweep``).
+   A controller's score is its worst max |e_Y| (on the truth) over those runs, infinite if one
+   aborts; the candidate's is the worst over the group's controllers. Exact pruning
+   (:func:`tune`): a candidate already worse than the best complete one is abandoned; the
+   choice is a full evaluation's.
 4. **Choice.** The lowest score; ties go to the lower worst ρ, then to the grid order. The
-   chosen values are written into each preset of the group between the markers
-   :data:`BEGIN` and :data:`END` of its ``mpc_node`` section; ``--check`` writes nothing and
-   fails if the shipped presets differ from what the procedure chooses.
+   chosen values are written into each preset of the group between the markers :data:`BEGIN`
+   and :data:`END` of its ``mpc_node`` section; ``--check`` writes nothing and fails if the
+   shipped presets differ from what the procedure chooses.
 
 Everything is deterministic (seeded noise, a fixed job order), so a rerun reproduces the
 shipped YAML; the report (``--report``) lists every candidate's ρ and score.

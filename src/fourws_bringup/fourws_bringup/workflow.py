@@ -1,6 +1,8 @@
-"""A run and its score: ``fourws run`` (the graph over topics, then metrics.json and figures
-from its bag) and ``fourws report`` (the same from a bag alone); ``fourws paper`` runs the
-former for each of its configurations (docs/graph.md, "Runs").
+"""A run and its score: ``fourws run`` and ``fourws report`` (docs/graph.md, "Runs").
+
+``fourws run``: the graph over topics, then metrics.json and figures from its bag;
+``fourws report``: the same from a bag alone. ``fourws paper`` runs the former for each of its
+configurations.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
 
 It subscribes vehicle/state and reference/trajectory and publishes control/mpc_command,
 control/drive_command and control/wheel_torques (docs/controller-interface.md). The same
-nodes and parameters as in ``fourws run`` (fourws_bringup.launching).
+nodes and parameters as in ``fourws run`` (fourws_bringup.launching; docs/graph.md, "Launch").
 """
 
 from fourws_bringup.launching import controllers_launch_description

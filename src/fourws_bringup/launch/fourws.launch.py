@@ -4,8 +4,9 @@
     ros2 launch fourws_bringup fourws.launch.py record:=true bag:=runs/car1 namespace:=car1
     ros2 launch fourws_bringup fourws.launch.py --show-args
 
-The same node table as ``fourws run`` (fourws_bringup.launching). The launch ends when the
-plant ends: exit 0 when it completed the scenario, 1 otherwise (the plant's code is logged).
+The same node table as ``fourws run`` (fourws_bringup.launching; docs/graph.md, "Launch"). The
+launch ends when the plant ends: exit 0 when it completed the scenario, 1 otherwise (the
+plant's code is logged).
 """
 
 from fourws_bringup.launching import fourws_launch_description

@@ -1,7 +1,8 @@
 """Conversions between fourws messages and plain numbers/arrays (the edge of every core).
 
 Stamps are handled as integer nanoseconds so that step k of a 10 ms lockstep run is stamped
-exactly ``k * 10_000_000`` ns and stamps compare equal across nodes.
+exactly ``k * 10_000_000`` ns and stamps compare equal across nodes (docs/graph.md,
+"Topics (100 Hz, simulated time)").
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Exit codes of fourws processes (nodes and the ``fourws`` command), one meaning each.
 
 A launch file or a script can tell a good run from a failed one by the plant's (or
-``fourws run``'s) exit status alone:
+``fourws run``'s) exit status alone (docs/graph.md, "Lifecycle and bad input"):
 
 ====  ===============  ==================================================================
 code  name             meaning

@@ -3,7 +3,8 @@
 A fourws node, once its nodes are destroyed and rclpy is shut down
 (:mod:`fourws_common.node_main`, ``FOURWS_FAST_EXIT``), and ``fourws run`` once it has written
 its run folder, have nothing left for the interpreter's own teardown, which took 0.15-0.5 s
-per process (numba, matplotlib, the middleware's singletons) on the path of every run.
+per process (numba, matplotlib, the middleware's singletons) on the path of every run
+(docs/graph.md, "Timing").
 """
 
 from __future__ import annotations

@@ -1,13 +1,14 @@
 """What a node rejected, and why: counted, logged at a limited rate, published on /diagnostics.
 
-Every fourws node owns one :class:`NodeHealth`. ``health.reject(kind, now_ns, text)`` counts a
-rejected input (or a fallback) under ``kind`` and logs ``text`` at most once per second of
-the caller's clock per kind; ``health.error(kind, now_ns, exc, what)`` does the same for an
-exception caught in a callback, with the input that caused it. The counts go out as a
-``diagnostic_msgs/DiagnosticArray`` on ``/diagnostics`` (one DiagnosticStatus named after the
-node: OK with no rejections, WARN once any input was rejected, ERROR once a callback raised)
-every ``period_s`` of steady time and within 0.1 s of a change, so a recorded run holds the
-final counts of every node (``input_rejections`` in metrics.json).
+Every fourws node owns one :class:`NodeHealth` (docs/graph.md, "Lifecycle and bad input").
+``health.reject(kind, now_ns, text)`` counts a rejected input (or a fallback) under ``kind``
+and logs ``text`` at most once per second of the caller's clock per kind;
+``health.error(kind, now_ns, exc, what)`` does the same for an exception caught in a callback,
+with the input that caused it. The counts go out as a ``diagnostic_msgs/DiagnosticArray`` on
+``/diagnostics`` (one DiagnosticStatus named after the node: OK with no rejections, WARN once
+any input was rejected, ERROR once a callback raised) every ``period_s`` of steady time and
+within 0.1 s of a change, so a recorded run holds the final counts of every node
+(``input_rejections`` in metrics.json).
 
 A node that has a runtime condition to report (solver status, fallbacks, deadline misses, the
 age of its newest input) registers a :class:`Runtime` provider; its status goes out in the

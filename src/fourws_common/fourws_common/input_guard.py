@@ -1,6 +1,7 @@
 """Input checks shared by every node (pure Python + numpy, no ROS): plausible values, stamps.
 
-A node checks each message at its edge, before any value reaches a core or an integrator:
+A node checks each message at its edge, before any value reaches a core or an integrator
+(docs/graph.md, "Lifecycle and bad input"):
 
 - :func:`implausible_fields` — a field that is not finite or lies outside the physical range
   of :data:`STATE_LIMITS` (a finite 1.7e308 m/s is as wrong as NaN: it overflows the first

@@ -1,13 +1,13 @@
 """``sync: latest`` for a controller's state input: answer the newest state, skip a backlog.
 
 In realtime a controller that fell behind (a stall, a slow step) must act on the newest
-state, not work through the states that queued meanwhile. With ``sync: latest`` the
-subscription (best effort, keep-last 1: ``fourws_common.state_input``) delivers what the
-transport still holds at once, and its callback only keeps the newest message (cheap: a
-backlog drains at once); a 1 ms steady-clock timer hands it to the node's handler; a state
-replaced before it was handled is counted (``skipped_state`` on /diagnostics). With
-``sync: lockstep`` every state is handled as it arrives (one state is in flight per step,
-and the answer is keyed by its stamp).
+state, not work through the states that queued meanwhile (docs/graph.md, "Timing"). With
+``sync: latest`` the subscription (best effort, keep-last 1: ``fourws_common.state_input``)
+delivers what the transport still holds at once, and its callback only keeps the newest
+message (cheap: a backlog drains at once); a 1 ms steady-clock timer hands it to the node's
+handler; a state replaced before it was handled is counted (``skipped_state`` on
+/diagnostics). With ``sync: lockstep`` every state is handled as it arrives (one state is in
+flight per step, and the answer is keyed by its stamp).
 """
 
 from __future__ import annotations

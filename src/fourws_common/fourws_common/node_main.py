@@ -1,32 +1,24 @@
 """The one ``main()`` shape every fourws node uses (Jazzy: ``rclpy.init`` is no context manager).
 
-Signals: SIGINT and SIGTERM request a stop: the executor's loop ends after the callback it is
-in, then every node is destroyed and rclpy shut down, in that order. (rclpy's own handlers
-shut the context down at once, under a running callback: a timer that logged then raised
-"publisher's context is invalid", which the executor reported as FATAL.) A node may install
-its own handlers in its constructor (the recorder drains first).
+Signals (docs/graph.md, "Timing"): SIGINT and SIGTERM request a stop: the executor's loop ends
+after the callback it is in, then every node is destroyed and rclpy shut down, in that order.
+A node may install its own handlers in its constructor (the recorder drains first).
 
-Before a node is destroyed, each of its reliable publishers gets up to
-``STOP_ACK_TIMEOUT_S`` (in all) for its samples to be acknowledged by every matched reader.
-A sample lost on the loopback is re-sent by its writer after a heartbeat; a writer destroyed
-at once loses it for good (a recorder stopped with the rest lost the last MPC commands of a
-run). The supervisor stops a recorder after the writers it records (``NodeSpec.stop_stage``).
+Before a node is destroyed, each of its reliable publishers gets up to ``STOP_ACK_TIMEOUT_S``
+(in all) for its samples to be acknowledged by every matched reader: a sample lost on the
+loopback is re-sent only while its writer lives. The supervisor stops a recorder after the
+writers it records (``NodeSpec.stop_stage``).
 
-Executor: rclpy's ``EventsExecutor`` (``rclpy.experimental``, in Jazzy) by default. At 100 Hz
-lockstep with ~15 message deliveries per step over six Python processes on two cores, the
+Executor: rclpy's ``EventsExecutor`` (``rclpy.experimental``, in Jazzy) by default; the
 ``SingleThreadedExecutor`` spends much of its CPU rebuilding its wait set on every
-``spin_once``; with the events executor the same run (improved on dlc_90_mu06, recorder on)
-went from a real-time factor of 1.37 to 2.25-2.33, with identical results. Set
-``FOURWS_EXECUTOR=single`` to fall back to the stable executor.
+``spin_once``. Set ``FOURWS_EXECUTOR=single`` to fall back to the stable executor.
 
 Exit: the executor is shut down before the nodes are destroyed (it holds their handles), so
 each node, and the process's DDS participant with the last one, is destroyed then and the
 other processes see it leave at once. With ``FOURWS_FAST_EXIT=1`` (the supervisor sets it for
 the processes it starts) the process then ends with :func:`fourws_common.fast_exit.exit_now`
-(output flushed, ``os._exit``): the interpreter's own teardown did nothing more for a node
-and took 0.15-0.5 s per process (numba, the middleware's singletons), on the path of every
-run's stop. Without it (a node run by hand, ``ros2 launch``, a test in-process) the process
-exits as usual.
+(output flushed, ``os._exit``). Without it (a node run by hand, ``ros2 launch``, a test
+in-process) the process exits as usual.
 
 Profiling: with ``FOURWS_PROFILE=DIR`` each process profiles its executor thread with
 cProfile from the first node built to shutdown and writes ``DIR/<node names>.<pid>.prof``

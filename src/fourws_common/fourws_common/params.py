@@ -1,12 +1,12 @@
 """Typed, ranged configuration fields for frozen dataclasses (pure Python, no ROS).
 
-Every core's configuration is a frozen dataclass whose fields are declared with
-:func:`param`: the metadata carries the allowed closed range, the unit and a one-line
-description. Nodes turn the same metadata into ROS parameter descriptors with ranges
-(``fourws_common.ros_params``), so a value is checked by one rule whether it comes from
-YAML, the command line or a runtime ``set_parameters`` call.
+Every core's configuration is a frozen dataclass whose fields are declared with :func:`param`
+(docs/conventions.md, "Configuration"): the metadata carries the allowed closed range, the
+unit and a one-line description. Nodes turn the same metadata into ROS parameter descriptors
+with ranges (``fourws_common.ros_params``), so a value is checked by one rule whether it comes
+from YAML, the command line or a runtime ``set_parameters`` call.
 
-Files: :func:`read_yaml_file` is the one YAML-file reader (params files, vehicle.yaml,
+Files: :func:`read_yaml_file` is the one YAML-file reader (params files, the car file,
 scenarios), with errors that name the file and the line; :func:`load_ros_params_yaml` picks
 a node's section of a ROS 2 params file.
 """
@@ -108,7 +108,7 @@ def from_mapping(cls: type[T], values: Mapping[str, Any], *, strict: bool = True
 
 
 def read_yaml_file(path: str | PathLike[str]) -> Any:
-    """The YAML content of a file: the one reader of params files, vehicle.yaml and scenarios.
+    """The YAML content of a file: the one reader of params files, the car file and scenarios.
 
     Raises ``ValueError`` naming the file (and, for a syntax error, its line and column, on
     one line) when it cannot be read or parsed.

@@ -1,12 +1,12 @@
 """Nearest point on a sampled path, with a moving search window (pure numpy).
 
 :func:`windowed_search` is the one search of the project for the point of a path nearest to
-a position; what is measured is its caller's (``best``). With the previous answer ``hint``
-it searches the window [hint − back, hint + ahead) of the n candidates (clipped to [0, n));
-with no hint (the first call), or when the window's best lies on an edge of the window that
-is not an end of the path, it searches all n. Its answer is therefore the full search's
-whenever the nearest candidate moves by less than the window between calls, which holds
-unless the path comes back near itself.
+a position (docs/architecture.md, "One owner per fact"); what is measured is its caller's
+(``best``). With the previous answer ``hint`` it searches the window [hint − back, hint + ahead)
+of the n candidates (clipped to [0, n)); with no hint (the first call), or when the window's
+best lies on an edge of the window that is not an end of the path, it searches all n. Its
+answer is therefore the full search's whenever the nearest candidate moves by less than the
+window between calls, which holds unless the path comes back near itself.
 
 Its users, each with its own measure and window:
 

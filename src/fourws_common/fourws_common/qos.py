@@ -1,10 +1,11 @@
 """rclpy QoS profiles of the fourws graph, built from the QoS kinds of ``fourws_common.topics``.
 
-The values and the reason of each kind are in that table; this module only turns them into
-``QoSProfile`` objects (``CONTROL_QOS``, ``LATCHED_QOS``, ``CLOCK_QOS``, ``LATEST_QOS`` and
-``NEWEST_QOS`` -- subscriber side -- and ``DIAGNOSTICS_QOS``), and converts between a profile
-and the plain ``history, depth, reliability, durability`` values a bag records
-(:func:`profile_from_dict`, :func:`dict_from_profile`), for the recorder and the replay.
+The values and the reason of each kind are in that table (docs/graph.md, "Topics (100 Hz,
+simulated time)"); this module only turns them into ``QoSProfile`` objects (``CONTROL_QOS``,
+``LATCHED_QOS``, ``CLOCK_QOS``, ``LATEST_QOS`` and ``NEWEST_QOS`` -- subscriber side -- and
+``DIAGNOSTICS_QOS``), and converts between a profile and the plain ``history, depth,
+reliability, durability`` values a bag records (:func:`profile_from_dict`,
+:func:`dict_from_profile`), for the recorder and the replay.
 """
 
 from __future__ import annotations

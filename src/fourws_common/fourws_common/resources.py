@@ -1,8 +1,9 @@
 """Locate a package's ``config/`` folder, from the source tree or the installed share.
 
-Cores take explicit paths; this helper is for nodes, tools and tests. It prefers the
-source tree (so unit tests and a checkout work without a build) and falls back to
-``share/<package>/config`` found through the ament index of the sourced workspace.
+Cores take explicit paths; this helper is for nodes, tools and tests (docs/conventions.md,
+"Configuration"). It prefers the source tree (so unit tests and a checkout work without a
+build) and falls back to ``share/<package>/config`` found through the ament index of the
+sourced workspace.
 """
 
 from __future__ import annotations

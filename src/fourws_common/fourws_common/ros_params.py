@@ -8,7 +8,8 @@ that leaves the config equal (a value set to what it already is, a ``ros2 param 
 node's own dump) is accepted and changes nothing (``on_change`` is not called).
 
 A params-file value of the wrong type is an error naming the key (an integer is accepted for
-a float field: ``3`` means ``3.0``); :func:`check_overrides` makes an unknown key one too.
+a float field: ``3`` means ``3.0``); :func:`check_overrides` makes an unknown key one too
+(docs/graph.md, "Lifecycle and bad input").
 """
 
 from __future__ import annotations

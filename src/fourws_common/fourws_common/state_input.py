@@ -1,28 +1,25 @@
 """The controllers' one /vehicle/state input pipeline (MPC and speed PID alike).
 
-Each state goes through, in this order:
+Each state goes through, in this order (docs/graph.md, "Lifecycle and bad input", "Timing"):
 
 1. the ``sync`` mode (:class:`~fourws_common.latest_input.LatestInput`, parameter ``sync`` of
    :class:`~fourws_common.input_guard.InputConfig`), which also sets the subscription's QoS:
    ``lockstep`` reliable keep-last 1 (``LATEST_QOS``: every state of a step), ``latest`` best
    effort keep-last 1 (``NEWEST_QOS``): a state lost while the node stalled is not repaired, so
-   it never holds back the newest one (a reliable reader delivers nothing past a lost sample
-   until the writer's next heartbeat re-sends it);
+   it never holds back the newest one;
 2. plausibility (:func:`~fourws_common.input_guard.implausible_fields` on the fields the core
    reads): an implausible state is rejected and counted;
 3. a reference must have arrived (else the state is not answered; logged every 5 s). The
    newest state that waited for it is kept and answered by :meth:`StateInput.retry_waiting`
-   when the reference comes: state and reference are separate DDS writers with no order
-   between them, and a lockstep bag replay does not publish its first state twice;
+   when the reference comes (state and reference are separate DDS writers with no order
+   between them, and a lockstep bag replay does not publish its first state twice);
 4. the stamp rule (:class:`~fourws_common.input_guard.StampGate`): a repeat is answered from
    the cache, a stamp in the past or the far future is rejected, a confirmed jump back is a
    new run (the node's core is reset), a confirmed jump ahead continues;
 5. the node's outputs must be matched (lockstep, ``wait_for_subscribers``, until the first
    answer of a run): the first state is not answered until the node's ``outputs``
-   publishers have matched that many subscriptions in total, so a subscriber that joined
-   last (the recorder) gets step 0 too; the newest state that waited is answered as soon
-   as they have (checked every ``MATCH_RETRY_PERIOD_S``; before, the run waited for the
-   plant to publish it again, 0.25 s later);
+   publishers have matched that many subscriptions in total; the newest state that waited is
+   answered as soon as they have (checked every ``MATCH_RETRY_PERIOD_S``);
 6. the node's step; an exception in it is caught, logged with the state, and answered with
    the node's held output. A callback never kills the node.
 """

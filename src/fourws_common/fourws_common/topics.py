@@ -8,8 +8,8 @@ bags and the tools name it; nodes subscribe and publish ``Topic.ros_name``, whic
 (``vehicle/state``), so a node started in a namespace (``-r __ns:=/car1``) moves its topics
 with it and two cars can share a domain. ``/clock`` (one simulated clock per domain, as
 ``use_sim_time`` expects) and ``/diagnostics`` (the one topic diagnostic aggregators read)
-stay absolute. docs/graph.md ("Topics") shows the same table with each topic's
-publishers and subscribers.
+stay absolute. The same table, with each topic's publishers and subscribers: docs/graph.md,
+"Topics (100 Hz, simulated time)".
 
 Also here: :class:`TopicInfo` (a topic as a bag records it: name, type, offered QoS values)
 and :func:`topic_info`, which looks a recorder's topic spec up in the table.

@@ -1,8 +1,8 @@
 """The wheel order of every per-wheel array and message field (pure Python, no ROS).
 
-FL, FR, RL, RR = 0, 1, 2, 3 (docs/conventions.md): the plant's wheel arrays, the
-VehicleState and WheelTorques fields, the allocator's torques and the report's columns all
-follow :class:`Wheel`.
+FL, FR, RL, RR = 0, 1, 2, 3 (docs/conventions.md, "Frames, signs, units"): the plant's wheel
+arrays, the VehicleState and WheelTorques fields, the allocator's torques and the report's
+columns all follow :class:`Wheel`.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""MPC node: the online parameter-reconfigured MPC on the ROS graph.
+"""Runs the MPC on the ROS graph as a node whose parameters reconfigure it online.
 
 Subscribes ``/vehicle/state`` (newest only, :data:`~fourws_common.qos.LATEST_QOS`),
 ``/reference/trajectory`` and ``/control/wheel_torques`` (the allocator's unmet yaw moment for
@@ -6,26 +6,25 @@ the command it answered: the next step starts from the yaw moment delivered,
 ``MpcController.report_delivered``); publishes ``/control/mpc_command`` and
 ``/control/mpc_diagnostics`` for every new state, stamped like it. All control logic lives in
 ``fourws_mpc.core.controller``; this node converts messages, measures the wall time of each
-controller step for the diagnostics, and guards its input:
+controller step for the diagnostics, and guards its input
+(docs/graph.md, "Lifecycle and bad input"):
 
 - a state that is not finite or not physically plausible
   (:func:`fourws_common.input_guard.implausible_fields`) is rejected; nothing reaches the core;
-- stamps go through a :class:`~fourws_common.input_guard.StampGate`: an already answered
-  stamp (the plant republishes while it waits) is answered again from cache, so the
-  controller's history (APCHA, warm start) advances exactly once per step; a stamp in the
-  past or far in the future is rejected without becoming the new "last";
-- a new run — a new reference trajectory (every plant start publishes one) or a confirmed
-  restart of the stamps — resets the controller, logged once;
+- stamps go through a :class:`~fourws_common.input_guard.StampGate`: an already answered stamp
+  is answered again from cache, so the controller's history advances exactly once per step; a
+  stamp in the past or far in the future is rejected without becoming the new "last";
+- a new run (a new reference trajectory or a confirmed restart of the stamps) resets the
+  controller, logged once;
 - an exception inside a step is caught and logged with the state that caused it; the node
   answers with its last valid command (``fallback``, solver status ``exception``), so a
   lockstep plant never stalls on it;
 - a parameter change is applied to the running controller (``MpcController.update_config``):
   plan, horizons and APCHA history are kept; setting a value it already has changes nothing.
 
-Every rejection is counted and logged at a limited rate, and published on ``/diagnostics``,
-beside a runtime status (``<node>: runtime``): the last solver status, fallbacks, deadline
-misses (a step longer than the control period) and the age of the newest state (WARN when
-stale).
+Every rejection is counted, logged at a limited rate and published on ``/diagnostics``, beside
+a runtime status (``<node>: runtime``): the last solver status, fallbacks, deadline misses (a
+step longer than the control period) and the age of the newest state (WARN when stale).
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
-"""The plant node's parameters (``plant_node``; defaults in ``config/plant.yaml``): the
-scenario, the timing mode, the run's end, and the bench's plant side (measurement noise,
-delays, estimated tyre forces, localisation filter, plant overrides). Every field carries its
-descriptor (``fourws_common.params.param``): range, unit, choices."""
+"""Declares the plant node's parameters (``plant_node``; defaults in ``config/plant.yaml``).
+
+They cover the scenario, the timing mode, the run's end, and the bench's plant side
+(measurement noise, delays, estimated tyre forces, localisation filter, plant overrides;
+docs/graph.md, "Configuration"). Every field carries its descriptor
+(``fourws_common.params.param``): range, unit, choices."""
 
 from __future__ import annotations
 

@@ -1,9 +1,9 @@
-"""The plant's outputs as standard ROS messages (the plant node's second job, kept apart).
+"""Converts the plant's outputs to standard ROS messages: the plant node's second job, kept apart.
 
 ``fill_odom`` and ``fill_imu`` refill messages built once (every field is set before each
-publish, which serialises at once; Odometry's constructor alone costs ~40 µs a step);
-``reference_messages`` builds the scenario's reference once. Frames: the pose in ``map``,
-the twist and the IMU in ``base_link`` (REP 105), yaw only (a level car).
+publish, which serialises at once); ``reference_messages`` builds the scenario's reference
+once. Frames: the pose in ``map``, the twist and the IMU in ``base_link`` (REP 105), yaw only
+(a level car). The standard topics: docs/plant.md, "The plant node".
 """
 
 from __future__ import annotations

@@ -1,55 +1,45 @@
-"""Plant node: runs the fourws_sim core as the vehicle on the ROS graph.
+"""Runs the fourws_sim core as the vehicle on the ROS graph.
 
 Publishes ``/vehicle/state``, ``/clock``, ``/vehicle/odom`` every step (in that order: the
 state starts the control chain) and the scenario's ``/reference/trajectory`` and
 ``/reference/path`` once (transient_local); ``/run/status`` (JSON: state, steps, simulated and
 wall time) at the start, every ``status_period_s`` of wall time while running, and at the end.
-Subscribes ``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``.
+Subscribes ``/control/mpc_command`` (δf, δr) and ``/control/wheel_torques``
+(docs/plant.md, "The plant node").
 
-The bench's plant side (``fourws_sim.core.sensing.Sensors``, set by a run's condition): the
-controllers see ``/vehicle/state`` (and ``/vehicle/odom``) as a car's sensors give it —
-seeded white or Gauss-Markov noise per channel (``noise_sigma``, ``noise_tau_s``,
-``noise_seed``; one draw per new state, a republished state is the same message) and, with
-``tyre_forces: estimated``, zero in the tyre force, load and adhesion fields; with
-``localisation: ekf`` the pose of a localisation filter (``core.localisation``, beyond the
-paper) in place of the raw fix. Their commands
-act ``delay_periods`` steps late, the steering after ``steer_dead_time_s`` more.
-``publish_ground_truth`` adds the true state on ``/vehicle/ground_truth`` (scored instead of
-the sensed one). ``vehicle_overrides`` changes the plant's vehicle (not the controllers').
-All defaults are the paper's ideal setting.
+The bench's plant side (``fourws_sim.core.sensing.Sensors``, set by a run's condition;
+docs/plant.md, "Sensing and localisation"): seeded white or Gauss-Markov noise per channel
+(``noise_sigma``, ``noise_tau_s``, ``noise_seed``), with ``tyre_forces: estimated`` zero tyre
+force, load and adhesion fields, with ``localisation: ekf`` a localisation filter's pose in
+place of the raw fix; commands act ``delay_periods`` steps late, the steering after
+``steer_dead_time_s`` more. ``publish_ground_truth`` adds the true state on
+``/vehicle/ground_truth`` (scored instead of the sensed one). ``vehicle_overrides`` changes
+the plant's vehicle (not the controllers'). All defaults are the paper's ideal setting.
 
-Timing modes:
+Timing modes (docs/graph.md, "Timing"):
 - ``lockstep`` (default): publish the state for step k, wait until the MpcCommand and the
-  WheelTorques stamped k are both held, then integrate to k+1. While waiting, the state k is
-  published again every ``republish_period_s`` of wall time (a late subscriber or a lost
-  message never stalls the run; controllers answer a repeated stamp with their cached
-  output). No command for ``command_timeout_s`` ends the run with a reason naming the
-  missing input.
-- ``realtime``: step on a 10 ms steady-clock timer, holding the latest valid commands.
-  A command older than ``command_max_age_s`` (its stamp is the state it answered) is
-  counted and warned about (``late_commands``); older than ``command_hold_timeout_s`` the
-  plant falls back to a safe hold — steer held at the last valid angles, every wheel torque
-  0 (coast) — until fresh commands arrive (``safe_hold_steps``). A tick later than 1.5
-  periods counts as an ``overrun``. The timer starts once the first state is answered (its
-  MpcCommand and WheelTorques held; the state republished and the wait bounded as in
-  lockstep), so a controller still starting never costs a safe hold.
+  WheelTorques stamped k are both held, then integrate to k+1; meanwhile the state is
+  republished every ``republish_period_s``. No command for ``command_timeout_s`` ends the run.
+- ``realtime``: step on a 10 ms steady-clock timer with the latest valid commands; a command
+  older than ``command_max_age_s`` counts as late (``late_commands``), older than
+  ``command_hold_timeout_s`` the plant holds safe (steer held, every wheel torque 0,
+  ``safe_hold_steps``); a tick later than 1.5 periods is an ``overrun``. The timer starts
+  once the first state is answered.
 
 Both modes hold the first state until ``/vehicle/state`` has ``wait_for_subscribers``
-subscribers (the recorder among them: a bag starts with step 0). Every timer runs on the
-steady clock, so ``use_sim_time:=true`` works on the plant too (it is the /clock source).
+subscribers. Every timer runs on the steady clock (the plant is the /clock source).
 
-End of a run: the final ``/run/status``, then the process lingers until every reliable
-subscriber has acknowledged the final state and status (at most ``linger_timeout_s``), writes
-the same status as JSON to ``status_file`` (if set: the reliable record a supervisor reads
-after the exit), and exits with :class:`fourws_common.exit_codes.ExitCode` COMPLETED (0),
-ABORTED (3: left the road or spun) or TIMEOUT (4: commands did not arrive).
+End of a run (docs/graph.md, "Lifecycle and bad input"): the final ``/run/status``, a linger
+until every reliable subscriber has acknowledged it (at most ``linger_timeout_s``), the same
+status as JSON to ``status_file`` (if set), and an exit with
+:class:`fourws_common.exit_codes.ExitCode` COMPLETED (0), ABORTED (3: left the road,
+``abort_lateral_error_m``, or spun, ``abort_sideslip_deg``) or TIMEOUT (4: commands did not
+arrive); the reason is logged and published on ``/run/status``.
 
-Bad input: a NaN/inf command, or a finite one beyond the physical ranges of
-``fourws_common.input_guard.COMMAND_LIMITS``, is rejected and the last valid one held
-(counted, logged at most once per second); angles beyond the actuator limits are clipped by
-the actuator model with a warning; in lockstep a command stamped for another step is ignored.
-The run ends at the scenario's end, when the car leaves the road (``abort_lateral_error_m``)
-or spins (``abort_sideslip_deg``); the reason is logged and published on ``/run/status``.
+Bad input: a NaN/inf command, or one beyond ``fourws_common.input_guard.COMMAND_LIMITS``, is
+rejected and the last valid one held (counted, logged at most once per second); angles beyond
+the actuator limits are clipped with a warning; in lockstep a command stamped for another step
+is ignored.
 """
 
 from __future__ import annotations

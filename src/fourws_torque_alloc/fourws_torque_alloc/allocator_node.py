@@ -1,9 +1,9 @@
-"""Torque allocator node: four in-wheel motor torques from the drive demand and the yaw moment.
+"""Allocates the four in-wheel motor torques from the drive demand and the yaw moment, as a node.
 
 Subscribes ``/vehicle/state`` (per-wheel Fz, Fy, μ with ``tyre_forces: oracle``; the measured
 a_x, a_y with ``tyre_forces: estimated``, ``core.tyre_estimate.TyreData``),
 ``/control/drive_command`` (total torque T) and ``/control/mpc_command`` (yaw moment Mz);
-publishes ``/control/wheel_torques``.
+publishes ``/control/wheel_torques`` (docs/lower-layer.md, "The nodes").
 
 - ``sync: lockstep`` (default): publishes once per step, when it holds all three inputs with
   the same stamp, stamped with it; a stamp already answered is answered again from cache.

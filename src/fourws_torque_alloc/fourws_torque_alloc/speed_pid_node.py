@@ -1,15 +1,16 @@
-"""Speed PID node: total drive force and torque from the speed error, eq. (24).
+"""Computes the total drive force and torque from the speed error, eq. (24), as a ROS node.
 
 Subscribes ``/vehicle/state`` (newest only) and ``/reference/trajectory`` (the speed
-profile); publishes ``/control/drive_command`` stamped like the state it answers. The
-reference speed is taken at the path sample nearest to the car; its feed-forward acceleration
-is v·dv/ds there. Input guards as in the MPC node (:mod:`fourws_common.input_guard`): a
-repeated stamp is answered from cache; a stamp in the past or far in the future, or a state
-that is not finite or not plausible, is rejected (counted, logged at a limited rate, on
-``/diagnostics``) and never reaches the integrator; a new reference or a confirmed restart of
-the stamps is a new run and resets the PID; an exception in a step is caught, logged with the
-state, and answered with the last valid command. Nothing is published before a reference has
-arrived. A parameter change keeps the integrator and filter state.
+profile); publishes ``/control/drive_command`` stamped like the state it answers
+(docs/lower-layer.md, "Speed PID", "The nodes"). The reference speed is taken at the path
+sample nearest to the car; its feed-forward acceleration is v·dv/ds there. Input guards as in
+the MPC node (:mod:`fourws_common.input_guard`): a repeated stamp is answered from cache; a
+stamp in the past or far in the future, or a state that is not finite or not plausible, is
+rejected (counted, logged at a limited rate, on ``/diagnostics``) and never reaches the
+integrator; a new reference or a confirmed restart of the stamps is a new run and resets the
+PID; an exception in a step is caught, logged with the state, and answered with the last
+valid command. Nothing is published before a reference has arrived. A parameter change keeps
+the integrator and filter state.
 """
 
 from __future__ import annotations

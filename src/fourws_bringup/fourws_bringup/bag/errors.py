@@ -1,5 +1,8 @@
-"""The one error of the bag package: a bag or MCAP file that cannot be written, read or
-recovered, with a message that names the file and what is wrong."""
+"""The one error of the bag package, :class:`BagError` (docs/bags.md).
+
+A bag or MCAP file that cannot be written, read or recovered, with a message that names the
+file and what is wrong.
+"""
 
 
 class BagError(Exception):

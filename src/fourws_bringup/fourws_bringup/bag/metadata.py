@@ -1,12 +1,12 @@
 """metadata.yaml of a bag folder, and QoS as rosbag2 (Jazzy, version 9) writes it.
 
-:func:`build_metadata` makes the ``rosbag2_bagfile_information`` mapping of a bag (one
-:class:`TopicRecord` per topic: name, type, offered QoS, message count, type hash),
-:func:`write_metadata` writes it atomically (temporary file, then rename). A topic's
-offered QoS is a full rosbag2 profile (:func:`qos_profile_dict`; deadline, lifespan and
-lease infinite, as rclpy's defaults), in metadata.yaml as a mapping and in an MCAP channel's
-``offered_qos_profiles`` as YAML text (:func:`qos_yaml`); :func:`parse_offered_qos` reads
-that text back (names, or rosbag2 version 8 integers).
+:func:`build_metadata` makes the ``rosbag2_bagfile_information`` mapping of a bag
+(docs/bags.md, "Layout"): one :class:`TopicRecord` per topic (name, type, offered QoS,
+message count, type hash); :func:`write_metadata` writes it atomically (temporary file, then
+rename). A topic's offered QoS is a full rosbag2 profile (:func:`qos_profile_dict`; deadline,
+lifespan and lease infinite, as rclpy's defaults), in metadata.yaml as a mapping and in an
+MCAP channel's ``offered_qos_profiles`` as YAML text (:func:`qos_yaml`);
+:func:`parse_offered_qos` reads that text back (names, or rosbag2 version 8 integers).
 """
 
 from __future__ import annotations

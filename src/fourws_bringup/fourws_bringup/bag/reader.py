@@ -4,8 +4,8 @@
 (``metadata.yaml``'s ``relative_file_paths``) or takes a bare ``.mcap``; :func:`check_mcap`
 tells a whole file from a truncated one (magic at both ends, a footer record) before any
 reader is asked; :class:`McapBag` lists the channels (:class:`ChannelInfo`: type, schema
-text, offered QoS, count) and yields messages raw or decoded, in recorded order. Every
-problem is a :class:`~.errors.BagError` naming the file.
+text, offered QoS, count) and yields messages raw or decoded, in recorded order
+(docs/bags.md, "Reading"). Every problem is a :class:`~.errors.BagError` naming the file.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 :func:`recover` rewrites every complete record of a (truncated) MCAP file as a whole, valid
 file; :func:`recover_folder` does that in place in a bag folder (the cut original kept
 aside) and rewrites its metadata.yaml from the file; :func:`in_bag_folder` tells which
-paths it repairs in place.
+paths it repairs in place (docs/bags.md, "Recovery").
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 The per-step topics (:data:`STEP_TOPICS`) become one row per header stamp (the first
 message of each stamp, sorted by stamp), after :func:`drop_strays` has left out the
 messages off the run's timeline; the reference trajectory, the last ``/run/status`` and the
-rejection counts the nodes published on ``/diagnostics`` come along.
+rejection counts the nodes published on ``/diagnostics`` come along (docs/bags.md,
+"Reading").
 """
 
 from __future__ import annotations

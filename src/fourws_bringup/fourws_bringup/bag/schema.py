@@ -1,11 +1,11 @@
 """Schema text and type hashes of the installed message types; the stamp in CDR bytes.
 
-A schema is the full ``ros2msg`` text rosbag2 stores in MCAP: the type's own ``.msg`` file,
-then for every type it depends on (recursively, depth first, each once) a line of 80 ``=``,
-``MSG: pkg/Type`` and that type's ``.msg`` text, read from the installed share folders
-(ament index). :func:`type_hash` is the type's RIHS01 hash, computed by ``rosbags``
-(``Typestore.hash_rihs01``) from that text; it equals the hash rosidl generated (the
-installed ``.json`` type description) for every type of the graph.
+A schema is the full ``ros2msg`` text rosbag2 stores in MCAP (docs/bags.md, "Layout"): the
+type's own ``.msg`` file, then for every type it depends on (recursively, depth first, each
+once) a line of 80 ``=``, ``MSG: pkg/Type`` and that type's ``.msg`` text, read from the
+installed share folders (ament index). :func:`type_hash` is the type's RIHS01 hash, computed
+by ``rosbags`` (``Typestore.hash_rihs01``) from that text; it equals the hash rosidl generated
+(the installed ``.json`` type description) for every type of the graph.
 
 Why the schema text is not ``rosbags``' ``Typestore.generate_msgdef(type, ros_version=2)``:
 that rebuilds the text from the parsed fields -- no comments, no blank lines, one space

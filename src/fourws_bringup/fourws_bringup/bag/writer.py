@@ -7,7 +7,7 @@ send time), else the header stamp (or a ``builtin_interfaces/Time`` first field,
 ``/clock``) read straight from the CDR bytes, else the log time; its ``sequence`` what the
 caller passes (the recorder: the publisher's sequence number), else the count of the
 topic's messages. Schemas carry the full ``ros2msg`` text and channels ``offered_qos_profiles`` and
-``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`).
+``topic_type_hash`` (:mod:`.schema`, :mod:`.metadata`; docs/bags.md, "Layout").
 """
 
 from __future__ import annotations

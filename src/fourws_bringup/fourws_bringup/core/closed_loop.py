@@ -18,7 +18,8 @@ sections), ``fourws_torque_alloc/config/{speed_pid,allocator}.yaml`` and
 ``fourws_sim/config/plant.yaml`` (period and RK4 substep).
 
 The core reads no clock. Pass ``clock`` (e.g. ``time.perf_counter``) to record the wall time
-of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise).
+of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise). :func:`run_closed_loop` returns a
+:class:`ClosedLoopLog` (docs/mpc.md, "Public API").
 """
 
 from __future__ import annotations

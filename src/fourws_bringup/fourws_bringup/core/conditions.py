@@ -1,17 +1,18 @@
 """Conditions of a run: what the controllers see and how late their commands act.
 
-A condition is the bench around the controllers, separate from the scenario (road, path,
-speed): measurement noise per channel (``fourws_sim.core.sensing``), a computation delay of
-N control periods, a steering dead time, where the allocator's and the MPC's tyre data come
-from (``oracle``: the plant's true per-wheel F_z, F_y and μ, the paper's idealised setting;
-``estimated``: ``fourws_torque_alloc.core.tyre_estimate`` from the measured a_x, a_y and a
-configured nominal μ), MPC parameter overrides (model mismatch: the controller's mass,
-inertia or cornering stiffness against the plant's), plant overrides over the scenario's
-vehicle (``vehicle_overrides``, e.g. a slower steering actuator), and a seed. ``IDEAL`` is
-the paper's setting. In a realistic condition the controllers receive the state of
-``fourws_sim.core.sensing.Sensors``: measured channels with their noise and, with estimated
-tyre data, zero in every tyre force, load and adhesion field, so no plant truth can leak into
-them. :func:`node_parameters` is the one translation of a condition into node parameters.
+A condition (docs/bench.md, "Conditions") is the bench around the controllers, separate from
+the scenario (road, path, speed): measurement noise per channel (``fourws_sim.core.sensing``),
+a computation delay of N control periods, a steering dead time, where the allocator's and the
+MPC's tyre data come from (``oracle``: the plant's true per-wheel F_z, F_y and μ, the paper's
+idealised setting; ``estimated``: ``fourws_torque_alloc.core.tyre_estimate`` from the
+measured a_x, a_y and a configured nominal μ), MPC parameter overrides (model mismatch: the
+controller's mass, inertia or cornering stiffness against the plant's), plant overrides over
+the scenario's vehicle (``vehicle_overrides``, e.g. a slower steering actuator), and a seed.
+``IDEAL`` is the paper's setting. In a realistic condition the controllers receive the state
+of ``fourws_sim.core.sensing.Sensors``: measured channels with their noise and, with
+estimated tyre data, zero in every tyre force, load and adhesion field, so no plant truth can
+leak into them. :func:`node_parameters` is the one translation of a condition into node
+parameters.
 """
 
 from __future__ import annotations

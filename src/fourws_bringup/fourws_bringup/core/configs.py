@@ -1,10 +1,10 @@
 """Where every node's parameters come from: package params files and controller presets.
 
-The one owner of configuration loading. A node's parameters are its package params file
-(:data:`PACKAGE_FILES`) and, for the nodes a controller preset configures
-(:data:`PRESET_NODES`), the preset ``fourws_bringup/config/controllers/<name>.yaml`` after it,
-so the preset overrides the package file. :func:`params_files` gives that list in that order:
-the graph passes it as ``--params-file`` arguments (``graph.graph_specs``), and the
+The one owner of configuration loading (docs/graph.md, "Configuration"). A node's parameters
+are its package params file (:data:`PACKAGE_FILES`) and, for the nodes a controller preset
+configures (:data:`PRESET_NODES`), the preset ``fourws_bringup/config/controllers/<name>.yaml``
+after it, so the preset overrides the package file. :func:`params_files` gives that list in
+that order: the graph passes it as ``--params-file`` arguments (``graph.graph_specs``), and the
 in-process loop, the report and the tools merge the same files in the same order
 (:func:`node_values`, :func:`load_mpc_config`, ...), so the two cannot take a parameter
 differently.

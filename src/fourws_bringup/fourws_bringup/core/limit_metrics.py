@@ -1,4 +1,4 @@
-"""Metrics at the limit of grip (docs/limits.md, "Metrics"), from a run's per-step arrays.
+"""Metrics at the limit of grip (docs/limits.md, "Metrics and rules"), from a run's per-step arrays.
 
 All on the plant's truth (the log's state), with μ the road's true mean adhesion under the
 car at each step::

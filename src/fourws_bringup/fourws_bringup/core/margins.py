@@ -1,11 +1,11 @@
 """Stability margins of the lateral loop, linearised on a straight path at one speed.
 
-**Plant** (the linear single-track model of the plant, with what the MPC's eq. (1)-(4) leave
-out), continuous states
+**Plant** (docs/bench.md, "Margins"): the plant's linear single-track model with what the
+MPC's eq. (1)-(4) leave out, continuous states
 
     s = [v_y, r, e2, e1, F_yf, F_yr, δ_f, δ_r, M_z, Ṁ_z]
 
-with the plant's per-axle cornering stiffness at static load C_f, C_r (``vehicle.yaml``)::
+with the plant's per-axle cornering stiffness at static load C_f, C_r (the car file)::
 
     v̇_y = (F_yf + F_yr)/m − v_x r          ṙ = (a F_yf − b F_yr + M_z)/I_z
     ė2 = r                                  ė1 = v_y + v_x e2
@@ -14,37 +14,25 @@ with the plant's per-axle cornering stiffness at static load C_f, C_r (``vehicle
     δ̇_f = (δ_f,cmd − δ_f)/τ_f,  δ̇_r = (δ_r,cmd − δ_r)/τ_r           (steering actuators)
     M_z follows M_z,cmd through the motors' eq. (32)
 
-(σ the relaxation lengths at static load; without relaxation F_y = C α). Sampled with a
+(σ the relaxation lengths at static load; without relaxation F_y = C α), sampled with a
 zero-order hold at the control period T; a computation delay of N periods and a steering dead
-time of D periods (rounded to whole periods) are shift registers on the commands.
+time of D periods (rounded to whole periods) are shift registers on the commands. Distance
+along the path and speed are not in the loop.
 
-**Controller**, its unconstrained gain at the operating point: for the MPC the first move of
-the unconstrained minimiser of eq. (16)-(19), taken from the controller itself
-(``MpcController.unconstrained_gain``: the QP's condensing, its weights at e = 0, the
-baseline horizons; disabled inputs removed), acting on
-ξ = [ζ; u(k−1)] with ζ the path-frame state of the controller's prediction model
-(``prediction_model``, ``prediction_discretisation``: with ``single_track_actuators`` ζ holds
-the actual road-wheel angles, the plant's δ_f, δ_r); for ``lqr_ff`` δ_f = −K x. The
-controller's memory is a state of the loop: the last max(N_d, 1) commands it sent (u(k−1)
-and, with known delays ``input_delay_periods``, ``steer_dead_time_s``, the buffer of
-``fourws_mpc.core.delay``); with delays the gain acts on the state predicted over N_d periods
-with those commands, ζ_d = A_k^{N_d} ζ + Σ_j A_k^{N_d−1−j} B_k u_applied(k + j), exactly as
-the controller predicts. The controller's known delays (its config) and the plant's delays
-(``delay_periods``, ``steer_dead_time_s`` here) are separate, so a compensation that
-assumes the wrong delay can be analysed too. The loop's modes are the lateral, yaw, tyre,
-actuator, delay and memory modes; distance along the path and speed are not in it.
+**Controller**: its unconstrained gain at the operating point; for the MPC the first move of
+the unconstrained minimiser of eq. (16)-(19) (``MpcController.unconstrained_gain``; disabled
+inputs removed) acting on ξ = [ζ; u(k−1)], ζ the path-frame state of its prediction model; for
+``lqr_ff`` δ_f = −K x. Its memory, the last max(N_d, 1) commands it sent, is a state of the
+loop; with known delays the gain acts on ζ_d = A_k^{N_d} ζ + Σ_j A_k^{N_d−1−j} B_k
+u_applied(k + j), as the controller predicts. Its known delays (``input_delay_periods``,
+``steer_dead_time_s`` of its config) and the plant's (``delay_periods``, ``steer_dead_time_s``
+here) are separate, so a compensation that assumes the wrong delay can be analysed too.
 
-Results: ``spectral_radius`` (largest |eigenvalue| of the closed loop per period: > 1 grows,
-the growth per second is ρ^(1/T)), ``frequency_hz`` of that pole, and the gain and phase
-margins of the loop broken at the front steer command, at the plant's input
-(``gain_margin_db``, ``phase_margin_deg``: the open loop L(e^{jωT}) from the commanded front
-steer back to the controller's front steer output, in negative feedback; the controller's own
-states, its memory of the commands it sent, stay closed, as in the car: a gain error of the
-actuator does not scale what the controller remembers having sent). ``gain_margin_db`` is
-the upper margin: the smallest gain increase that puts L through −1 (> 0 dB). Crossings
-below 0 dB (a gain decrease; the MPC's u = u(k−1) + Δu is an integrator) are not reported.
-``phase_margin_deg`` is the smallest phase lag that destabilises a stable loop, and
-``delay_margin_ms`` the smallest pure delay at the front steer's input that does
+Results: ``spectral_radius`` ρ (largest |eigenvalue| of the closed loop per period: > 1 grows,
+by ρ^(1/T) per second), ``frequency_hz`` of that pole, and the margins of the open loop
+L(e^{jωT}) from the commanded front steer back to the controller's front steer output, in
+negative feedback, the controller's memory closed: ``gain_margin_db`` (the upper margin only;
+crossings below 0 dB are not reported), ``phase_margin_deg`` and ``delay_margin_ms``
 (:func:`_loop_margins`).
 """
 

@@ -1,4 +1,4 @@
-"""Tracking metrics of a run (the metrics.json keys of docs/graph.md), from per-step arrays.
+"""Tracking metrics of a run, the metrics.json keys (docs/graph.md, "Runs"), from per-step arrays.
 
 Lateral and heading errors are measured against the reference path geometry by
 :func:`path_errors` (:func:`path_nearest`) — nearest point with projection between samples,

@@ -1,6 +1,7 @@
 """The controllers' input from a car's standard messages (pure: numbers in, numbers out).
 
-What each fourws controller reads of ``fourws_msgs/VehicleState`` (docs/controller-interface.md):
+What each fourws controller reads of ``fourws_msgs/VehicleState`` (docs/controller-interface.md,
+"Inputs"):
 
 ============  ==========================================  ======================================
 field         MPC / speed PID / allocator                 standard source (``adapter_node``)

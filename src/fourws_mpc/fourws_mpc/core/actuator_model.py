@@ -1,4 +1,4 @@
-"""Single-track model of eq. (1) extended by the steering actuators' first-order lag.
+"""Extends the single-track model of eq. (1) by the steering actuators' first-order lag.
 
 A documented deviation from the paper's assumption (6) that the commanded road-wheel angles act
 at once (``docs/mpc.md``, "Actuator-aware prediction"). The state is ζ of eq. (1) with the
@@ -16,17 +16,12 @@ actuator law (``fourws_sim.core.actuators.steer_derivative`` without its rate li
                     (δr,cmd − δr,act)/τ_r ]                                   (eq. 1 + lag)
 
 τ_f, τ_r are ``steer_front_time_constant_s``, ``steer_rear_time_constant_s`` (the plant's names
-and values in ``vehicle.yaml``). The yaw moment still acts at once: Mz is not measured, so the
-motors' eq. (32) would need an open-loop estimate of its two states (not modelled; the margins
-of ``fourws margins`` include the motors in the plant).
-
-Jacobians are exact, by the chain rule through ``model.jacobians``::
+and values in the car file). The yaw moment still acts at once (the motors' eq. (32) is not
+modelled). Jacobians are exact, by the chain rule through ``model.jacobians``, with (A_t, B_t)
+of eq. (1) at the actual angles (tested against central finite differences of :func:`dynamics`)::
 
     A_a = [[A_t, B_t[:, δf], B_t[:, δr]], [0, −1/τ_f, 0], [0, 0, −1/τ_r]]
     B_a = [[0, 0, B_t[:, Mz]], [1/τ_f, 0, 0], [0, 1/τ_r, 0]]
-
-with (A_t, B_t) of eq. (1) evaluated at the actual angles (tested against central finite
-differences of :func:`dynamics`).
 """
 
 from __future__ import annotations

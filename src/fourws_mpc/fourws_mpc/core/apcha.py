@@ -1,14 +1,13 @@
-"""Adaptive prediction and control horizon adjustment (APCHA), eq. (7)-(15).
+"""Adapts the prediction and control horizons (APCHA), eq. (7)-(15).
 
-Indicators::
+Indicators (docs/mpc.md, "APCHA")::
 
     e_s = |e_Y| / e_Y,max + λ |e_φ| / e_φ,max,     λ ∈ (0, 1)                 # eq. (7)
     k_e = |e_s(k) − e_s(k−1)| / T                                               # eq. (8)
     k_u = ‖D_Δu⁻¹ Δu‖_∞,  D_Δu = diag(Δδf,max, Δδr,max, ΔMz,max)                # eq. (9)-(11)
 
-(eq. (12) repeats eq. (9).) Δu is the last *applied* increment u(k−1) − u(k−2): the increment
-of step k is what the QP with the new horizons returns, so it cannot steer them. k_e = 0 on the
-first step.
+(eq. (12) repeats eq. (9).) Δu is the last *applied* increment u(k−1) − u(k−2) (the increment
+of step k is the QP's output); k_e = 0 on the first step.
 
 Prediction horizon, eq. (13) (e_s = 2ε1, left open by the paper, goes to the middle branch)::
 
@@ -25,17 +24,12 @@ Clamps, eq. (15)::
     N_p = clamp(N_p, N_p,min, N_p,max);  N_c = clamp(N_c^t, N_c,min, N_c,max);
     N_c = max(⌊N_p/3⌋, min(N_c, ⌊N_p/2⌋))
 
-Readings (the paper is not self-consistent here; documented in docs/mpc.md):
-
-* Step-size constraint ("horizon coupling and step size constraints ... regulate the
-  variation", section 3.1): with ``np_rate_limit`` N_p moves from its previous value towards
-  N_p^t by at most ΔN_p per control period.
-* N_c^i: the paper writes N_c^i = ⌊N_p^t/3⌋, yet states the baseline N_c = 6 at N_p = 12
-  (⌊12/3⌋ ± 1 never reaches 6 after the clamp) and reports N_c rising 6 → 10 while N_p = 20
-  (⌊20/3⌋ + 1 = 7). With ``nc_base = "previous"`` (default) N_c^i is the previous N_c (starting
-  at the baseline), so ΔN_c is a per-period step, the ⌊N_p/3⌋ of eq. (14) is the lower clamp
-  of eq. (15), and both reported behaviours follow. ``nc_base = "np_third"`` is the literal
-  eq. (14).
+Readings (the paper is not self-consistent here): with ``np_rate_limit`` N_p moves from its
+previous value towards N_p^t by at most ΔN_p per period (the "step size constraint" of section
+3.1). The printed N_c^i = ⌊N_p^t/3⌋ contradicts the paper's baseline N_c = 6 at N_p = 12 and
+its N_c 6 → 10 at N_p = 20; with ``nc_base = "previous"`` (default) N_c^i is the previous N_c
+(starting at the baseline), so ΔN_c is a per-period step and ⌊N_p/3⌋ acts through the clamp of
+eq. (15). ``nc_base = "np_third"`` is the literal eq. (14).
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""The friction-aware model's axle tyre: Magic Formula lateral force of one axle and its
-slopes (docs/mpc.md, "Friction-aware prediction").
+"""Gives one axle's Magic Formula lateral force and its slopes, for the friction-aware model.
 
-For an axle with cornering stiffness K (N/rad, both tyres) and peak force D = μ F_z ε (N)::
+The friction-aware model's axle tyre (docs/mpc.md, "Friction-aware prediction"). For an axle
+with cornering stiffness K (N/rad, both tyres) and peak force D = μ F_z ε (N)::
 
     F(α) = D sin(C atan(z − E (z − atan z))),   z = B α,   B = K / (C D)        (MF, pure slip)
 
-so F = K α at small α and |F| ≤ D. Its slopes:
+so F = K α at small α and |F| ≤ D. Its slopes::
 
     ∂F/∂α = K cos(C atan φ) (1 − E + E/(1 + z²)) / (1 + φ²),   φ = z − E (z − atan z)
     ∂F/∂D = g(z) − z g'(z),   g(z) = sin(C atan φ(z))       (B follows D)

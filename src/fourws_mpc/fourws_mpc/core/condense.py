@@ -1,4 +1,4 @@
-"""The condensed QP of one MPC step, compiled (numba): eq. (5)-(6), (16)-(20) as in ``qp``.
+"""Builds the condensed QP of one MPC step, compiled (numba): eq. (5)-(6), (16)-(20) as in ``qp``.
 
 :func:`condense` fills, for one (N_p, N_c), the Hessian H and gradient g of the scaled
 increments ΔŨ and the rows of the constraint matrix and bounds that change every step. It is

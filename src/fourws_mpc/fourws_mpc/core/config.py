@@ -1,10 +1,11 @@
-"""Every parameter of the MPC of section 3, as one frozen dataclass (``mpc.yaml``'s keys).
+"""Holds every parameter of the MPC of section 3 as one frozen dataclass (``mpc.yaml``'s keys).
 
 The values live in ``fourws_mpc/config/mpc.yaml`` (a unit test checks the file and the
 defaults here agree); the controller presets of ``fourws_bringup/config/controllers/`` override
-what differs. Degrees only where the key says ``_deg``; SI otherwise. The vehicle constants use
-the plant's names (``fourws_sim/config/vehicle.yaml``); a unit test keeps their nominal values
-equal to the plant's, so a model mismatch is always an explicit override.
+what differs (docs/graph.md, "Configuration"). Degrees only where the key says ``_deg``; SI
+otherwise. The vehicle constants use the plant's names (the car file,
+``fourws_common/config/vehicles/NAME.yaml``); a unit test keeps their nominal values equal to
+the plant's, so a model mismatch is always an explicit override.
 """
 
 from __future__ import annotations

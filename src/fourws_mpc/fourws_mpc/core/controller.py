@@ -1,44 +1,36 @@
-"""The MPC controller of section 3: one step read as named stages, and the fallback.
+"""Runs one step of the MPC of section 3 as named stages, and falls back when the solve fails.
 
-One call of :meth:`MpcController.step` at time k, stage by stage:
+One call of :meth:`MpcController.step` at time k, stage by stage (docs/mpc.md, "Public API"):
 
 1. **read state** (:meth:`~MpcController._read_state`): the measured :class:`VehicleSample`
    and μ, checked finite and plausible (:data:`fourws_common.input_guard.STATE_LIMITS`);
    a bad one raises ``ValueError`` before anything changes;
-2. **errors**: nearest point on the reference and e_Y (m, left +), e_φ (rad)
-   (``reference``);
+2. **errors**: nearest point on the reference and e_Y (m, left +), e_φ (rad) (``reference``);
 3. **weights**: fixed (Q_φ, Q_Y, R_Δδ, R_ΔMz from the config) or fuzzy (section 3.2,
    ``fuzzy_weights``) from (e_Y, e_φ);
-4. **horizons**: fixed (N_p, N_c baseline) or APCHA (eq. 7-15, ``apcha``) from e_s, the
-   previous e_s, the last applied increment and the previous horizons;
-5. **prediction**: state ζ0 = [vy, vx, φ, r, Y, X] in the path frame at the nearest point
-   (``prediction_frame = "path"``; "global" uses the map frame as printed in the paper),
-   extended by the model's own states (the measured road-wheel angles for
-   ``single_track_actuators``; with ``single_track_relaxation`` also the transient slip
-   angles its observer estimates, whose memory is committed in stage 7), the reference
-   outputs (φ_ref, Y_ref) at s + vx T i, i = 1..N_p, and the injected prediction model
-   (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4). With known delays
-   (``input_delay_periods``, ``steer_dead_time_s``) ζ0 is predicted over the delay N_d with
-   the commands already sent and the reference starts N_d periods later (``delay``);
+4. **horizons**: fixed (N_p, N_c baseline) or APCHA (eq. 7-15, ``apcha``);
+5. **prediction**: ζ0 = [vy, vx, φ, r, Y, X] in the path frame at the nearest point
+   (``prediction_frame = "path"``; "global": the paper's map frame), extended by the model's
+   own states (an observer's memory is committed in stage 7), the reference outputs
+   (φ_ref, Y_ref) at s + vx T i, i = 1..N_p, and the injected prediction model
+   (``prediction_model``) discretised at (ζ0, u(k−1)), eq. (4). With known delays ζ0 is
+   predicted over the delay N_d with the commands already sent and the reference starts N_d
+   periods later (``delay``);
 6. **solve**: the QP of eq. (16)-(20) (``qp``) with the injected solver (``qp_solver``),
-   warm-started from the previous plan shifted by one; hard bounds |vy| ≤ vx tan β_max and
-   |r| ≤ factor μ g / vx on predicted steps i ≥ ``state_bounds_from_step``, each relaxed to
-   the current |vy| or |r| when the car is already beyond it ("no worse than now": a bound
-   the state already violates cannot be met within a few steps and would only make the QP
-   infeasible); when the QP is still infeasible (a lagging steering angle that keeps
-   moving the state after the start), it is solved again without the hard bounds and the
-   status says so (:data:`STATE_BOUNDS_DROPPED`); the paper's weights through the cost
-   scaling (``cost_scaling``); with ``terminal_cost: lqr`` (beyond the paper) the
-   velocity-form LQR cost-to-go at the horizon's end (``terminal_cost``);
+   warm-started from the previous plan shifted by one, the paper's weights through
+   ``cost_scaling`` and, with ``terminal_cost: lqr``, the LQR cost-to-go (``terminal_cost``);
+   hard bounds |vy| ≤ vx tan β_max and |r| ≤ factor μ g / vx on predicted steps
+   i ≥ ``state_bounds_from_step``, each relaxed to the current |vy| or |r| when the car is
+   already beyond it; a QP still infeasible is solved again without them
+   (:data:`STATE_BOUNDS_DROPPED`);
 7. **result**: u(k) = u(k−1) + Δu*(k), eq. (22), or the fallback; the step's history (with
    the buffer of commands sent) is committed only here.
 
-Fallback: when the solver does not return a trusted solution (``qp_solver.trusted``; or the
-QP is infeasible because of the hard bounds), the previous optimal plan is applied shifted by
-one step (u(k|k−1), then u(k+1|k−2), ...); when it is used up, or there was none, the last
-command is held. The result is flagged ``fallback`` and is always finite; QP data a solver
-would refuse (non-finite or inconsistent) are a failed solve, never handed over.
-The core never reads a clock.
+Fallback (docs/mpc.md, "Solver"): without a trusted solution (``qp_solver.trusted``; or a QP
+infeasible because of the hard bounds) the previous optimal plan is applied shifted by one
+step (u(k|k−1), then u(k+1|k−2), ...), and the last command is held once it is used up or
+absent. The result is flagged ``fallback`` and is always finite; QP data a solver would
+refuse are a failed solve, never handed over. The core never reads a clock.
 """
 
 from __future__ import annotations

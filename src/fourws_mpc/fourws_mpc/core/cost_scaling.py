@@ -1,6 +1,7 @@
-"""Cost scaling, one for every controller (docs/mpc.md, "Cost scaling").
+"""Turns the paper's weights into the QP's effective weights, one scaling for every controller.
 
-The paper's weights multiply *normalised* channels, each divided by a characteristic size::
+The paper's weights multiply *normalised* channels, each divided by a characteristic size
+(docs/mpc.md, "Cost scaling")::
 
     J = Σ_i Q_φ (e_φ,i / s_φ)² + Q_Y (e_Y,i / s_Y)²
       + Σ_j R_Δδ [(Δδf,j / s_Δδf)² + (Δδr,j / s_Δδr)²] + R_ΔMz (ΔMz,j / s_ΔMz)² + ρ ε²

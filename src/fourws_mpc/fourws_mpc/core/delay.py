@@ -1,4 +1,4 @@
-"""Compensation of known command delays: predict over the delay with the commands already sent.
+"""Compensates known command delays: predicts over the delay with the commands already sent.
 
 A documented deviation from the paper's assumption (6) that a command acts at once
 (``docs/mpc.md``, "Delay compensation"); the scheme of Autoware's MPC lateral controller. With a

@@ -1,4 +1,4 @@
-"""The matrix exponential, compiled (numba), for the zero-order hold of ``model.zoh``.
+"""Computes the matrix exponential, compiled (numba), for the zero-order hold of ``model.zoh``.
 
 Scaling and squaring with a diagonal Padé approximant (Higham, "The scaling and squaring
 method for the matrix exponential revisited", SIAM J. Matrix Anal. Appl. 26, 2005, Alg. 2.3):
@@ -6,7 +6,8 @@ the degree m ∈ {3, 5, 7, 9, 13} is the lowest with ‖A‖₁ ≤ θ_m; beyond
 2^−s so that ‖A/2^s‖₁ ≤ θ_13 and the result squared s times. With r_m = p_m(A)/p_m(−A),
 p_m(A) = V + U (U the odd, V the even powers), e^A ≈ (V − U)⁻¹ (V + U), accurate to the
 unit round-off in exact arithmetic. ``scipy.linalg.expm`` (Al-Mohy & Higham 2009) is the
-oracle of the unit test; it is not callable from compiled code, hence this copy.
+oracle of the unit test; it is not callable from compiled code, hence this copy (the hold:
+docs/mpc.md, "Actuator-aware prediction").
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Friction-aware prediction model: the relaxation model with saturating axle forces.
+"""Extends the relaxation model by saturating axle forces: the friction-aware prediction model.
 
 Beyond the paper (docs/mpc.md, "Friction-aware prediction"). The state and input are those of
 ``relaxation_model``; each axle's lateral force is the Magic Formula of ``axle_tyre`` on its

@@ -1,4 +1,4 @@
-"""Fuzzy adaptive MPC weights, section 3.2, Tables 1-4, eq. (23).
+"""Schedules the MPC's weights by fuzzy inference: section 3.2, Tables 1-4, eq. (23).
 
 Inputs: lateral error e_Y ∈ [−3, 3] m and heading error e_φ ∈ [−8, 8]° (e_Y = Y − Y_ref, left
 of the path positive; e_φ = φ − φ_ref, CCW positive), each with five sets NB NS ZO PS PB.
@@ -13,24 +13,17 @@ the universe ends (the usual reading; docs/mpc.md, "Fuzzy weights"):
 
 Rules (Tables 1-4, rows e_φ, columns e_Y), Mamdani: rule strength = min of the two input
 memberships, implication = min (clipping), aggregation = max, centroid defuzzification (the
-exact centroid of the sampled piecewise-linear aggregate, as ``skfuzzy.defuzz``).
-Membership functions are built with ``skfuzzy.trimf``.
+exact centroid of the sampled piecewise-linear aggregate, as ``skfuzzy.defuzz``); membership
+functions by ``skfuzzy.trimf``. The weights are eq. (23): Q_Y = r_QY Q_Y,max,
+Q_φ = r_Qφ Q_φ,max, R_Δδ = r_RΔδ R_Δδ,max, R_ΔMz = r_RΔMz R_ΔMz,max.
 
-Online evaluation: Mamdani inference costs ~20 ms per output in
-``skfuzzy.control.ControlSystemSimulation``, so the four response surfaces are tabulated on a
-grid with a vectorised Mamdani evaluation and interpolated bilinearly online (inputs clipped to
-the universes); all four ratios take a few microseconds. The weights are
-eq. (23): Q_Y = r_QY Q_Y,max, Q_φ = r_Qφ Q_φ,max, R_Δδ = r_RΔδ R_Δδ,max, R_ΔMz = r_RΔMz R_ΔMz,max.
-
-Shipped surfaces: the default :class:`FuzzySpec`'s surfaces are package data
-(``fourws_mpc/data/fuzzy_surfaces.npz``, :data:`SHIPPED_SURFACES`), loaded in about a
-millisecond instead of computed at every MPC start (~0.3 s, more while the other nodes start,
-plus ~0.2 s to import ``skfuzzy``, which is now imported only by :func:`mamdani` and the
-test oracle). The file holds the surfaces and a fingerprint of everything they depend on (the
-spec, the sets and the rule tables, :func:`surfaces_fingerprint`); a file whose fingerprint
-differs is ignored and the surfaces are computed, so it can never be silently stale
-(``tests/unit/test_mpc_fuzzy.py`` also checks it against :func:`mamdani` to 1e-12).
-After changing the sets, the rule tables or the default spec, regenerate it with
+Online, the four response surfaces are tabulated on a grid by a vectorised Mamdani evaluation
+and interpolated bilinearly (inputs clipped to the universes). The default :class:`FuzzySpec`'s
+surfaces are package data (``fourws_mpc/data/fuzzy_surfaces.npz``, :data:`SHIPPED_SURFACES`)
+with a fingerprint of the spec, the sets and the rule tables (:func:`surfaces_fingerprint`); a
+file whose fingerprint differs is ignored and the surfaces are computed, so it can never be
+silently stale. ``skfuzzy`` is imported only by :func:`mamdani` and the test oracle. After
+changing the sets, the rule tables or the default spec, regenerate it with
 
     python -m fourws_mpc.core.fuzzy_weights --write
 

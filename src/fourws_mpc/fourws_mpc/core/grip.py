@@ -1,28 +1,23 @@
-"""The road's grip as the MPC sees it: a μ estimate and the envelope it gives
-(docs/mpc.md, "Friction-aware prediction").
+"""Estimates the road's grip as the MPC sees it: a μ estimate and the envelope it gives.
+
+Part of the friction-aware prediction (docs/mpc.md, "Friction-aware prediction").
 
 **Estimate.** When the state carries μ (the idealised world: the plant's truth) it is used.
-Otherwise μ̂ comes from what a car measures: the transient slips α̂' of the slip observer and
-a_y. The car's lateral force is m a_y; the axles' Magic Formula forces at α̂' give it for a
-road μ by the sum F_f(α̂'f; μ F_z,f ε) + F_r(α̂'r; μ F_z,r ε), which grows with μ. When that
-sum in the linear tyres, K_f α̂'f + K_r α̂'r, exceeds |m a_y| by a clear margin
-(``mu_evidence_deficit`` m g, well above the noise of a_y and of the slips), the tyres have
-shown their peak and the μ that matches m a_y is the evidence (bisection). Evidence is taken
-only under mostly lateral use, |a_x| ≤ ``mu_evidence_max_ax`` μ̂ g (0.31: the friction
-ellipse then takes at most 5 % of the lateral grip, half the evidence margin); under harder
-braking or driving μ̂ holds, since the split of the longitudinal forces between the wheels
-is not known (on split μ under ABS the low side's wheels have spent their grip
-longitudinally, and the single-μ sum read that as a road of μ 0.4). The sum needs no
-yaw acceleration, which a split between the axles would (a filtered ṙ lags a lane change
-and made the split wrong by half). μ̂ follows falling evidence with ``mu_fall_time_s``,
-rising evidence with ``mu_rise_time_s``, and without evidence (linear tyres say nothing of
-the peak) returns to the prior ``mu_default`` with ``mu_rise_time_s``. μ̂ is never below the
-grip in use, √(a_x² + a_y²)/g, and is clamped to [``mu_floor``, ``mu_ceiling``]; a clamp is
-flagged.
+Otherwise μ̂ comes from the transient slips α̂' of the slip observer and a_y. The car's lateral
+force is m a_y; the axles' Magic Formula forces F_f(α̂'f; μ F_z,f ε) + F_r(α̂'r; μ F_z,r ε) grow
+with μ. When the linear tyres' sum K_f α̂'f + K_r α̂'r exceeds |m a_y| by at least
+``mu_evidence_deficit`` m g, the tyres have shown their peak and the μ that matches m a_y is
+the evidence (bisection). Evidence is taken only while |a_x| ≤ ``mu_evidence_max_ax`` μ̂ g
+(0.31: the friction ellipse then takes at most 5 % of the lateral grip, half the evidence
+margin); else μ̂ holds, since the split of the longitudinal forces between the wheels is not
+known. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
+``mu_rise_time_s``, and without evidence returns to the prior ``mu_default`` with
+``mu_rise_time_s``. μ̂ is never below the grip in use, √(a_x² + a_y²)/g, and is clamped to
+[``mu_floor``, ``mu_ceiling``]; a clamp is flagged.
 
 **Envelope** (Beal and Gerdes 2013), from μ̂:
 
-* yaw rate |r| ≤ ``yaw_rate_mu_factor`` μ̂ g / v_x (as before, now with μ̂);
+* yaw rate |r| ≤ ``yaw_rate_mu_factor`` μ̂ g / v_x;
 * sideslip |β| ≤ α_peak,r + b r_max / v_x, with α_peak,r the rear axle's peak slip angle
   (``max_sideslip_deg`` stays the upper cap);
 * steer: each axle's kinematic slip at the current state within its peak slip

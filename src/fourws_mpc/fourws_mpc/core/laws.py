@@ -1,6 +1,7 @@
-"""The lateral control laws by name (parameter ``law``): the MPC of section 3 and the
-textbook reference ``lqr_ff``, behind one interface (``step``, ``reset``,
-``update_config``, ``adopt_reference``, ``u_prev``)."""
+"""Picks the lateral control law by name (parameter ``law``), behind one interface.
+
+The MPC of section 3 and the textbook reference ``lqr_ff`` share ``step``, ``reset``,
+``update_config``, ``adopt_reference`` and ``u_prev`` (docs/architecture.md, "Seams")."""
 
 from __future__ import annotations
 

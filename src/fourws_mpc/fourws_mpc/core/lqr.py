@@ -1,10 +1,10 @@
-"""A textbook lateral controller: discrete LQR on the dynamic lateral-error model with
-steady-state curvature feed-forward, front steer only (the reference beside the MPC).
+"""Computes a textbook front-steer law: discrete LQR plus steady-state curvature feed-forward.
 
-Error model (Rajamani, *Vehicle Dynamics and Control*, 2nd ed., 2012, sec. 2.5 and 3.2),
-per-tyre cornering stiffnesses C_f, C_r (two tyres per axle), speed V_x, states
-x = [e1, ė1, e2, ė2] (lateral offset of the CG from the path, m, left +; its rate; heading
-error ψ − ψ_ref, rad; its rate), input the front road-wheel angle δ::
+The reference beside the MPC (docs/mpc.md, "The textbook reference `lqr_ff`"). Error model
+(Rajamani, *Vehicle Dynamics and Control*, 2nd ed., 2012, sec. 2.5 and 3.2), per-tyre
+cornering stiffnesses C_f, C_r (two tyres per axle), speed V_x, states x = [e1, ė1, e2, ė2]
+(lateral offset of the CG from the path, m, left +; its rate; heading error ψ − ψ_ref, rad;
+its rate), input the front road-wheel angle δ::
 
     ẋ = A x + B δ + B_κ ψ̇_des,     ψ̇_des = V_x κ
 
@@ -14,18 +14,17 @@ error ψ − ψ_ref, rad; its rate), input the front road-wheel angle δ::
          [0, −2(C_f a − C_r b)/(I_z V_x), 2(C_f a − C_r b)/I_z, −2(C_f a² + C_r b²)/(I_z V_x)]]
     B = [0, 2 C_f/m, 0, 2 C_f a/I_z]ᵀ
 
-Feedback δ_fb = −K x with K the discrete LQR gain of (A, B) sampled with a zero-order hold at
-the control period T (``scipy.linalg.solve_discrete_are``). Weights by Bryson's rule
-(Bryson & Ho, *Applied Optimal Control*, 1975): Q = diag(1/x_i,max²), R = 1/δ_max², with the
-largest acceptable value of each state and of the input (:class:`LqrWeights`).
-
-Feed-forward for a constant curvature κ (Rajamani eq. 3.12): with L = a + b,
-K_V = (b m)/(2 C_f L) − (a m)/(2 C_r L) the understeer gradient and a_y = V_x² κ,
+Feedback δ_fb = −K x, K the discrete LQR gain of (A, B) sampled with a zero-order hold at the
+control period T (``scipy.linalg.solve_discrete_are``); Bryson's-rule weights (Bryson & Ho,
+*Applied Optimal Control*, 1975) Q = diag(1/x_i,max²), R = 1/δ_max², with the largest
+acceptable value of each state and of the input (:class:`LqrWeights`). The feed-forward for a
+constant curvature κ (Rajamani eq. 3.12), with L = a + b, K_V = (b m)/(2 C_f L) − (a m)/(2 C_r L)
+the understeer gradient and a_y = V_x² κ::
 
     δ_ff = L κ + K_V a_y − k₃ (b κ − a m V_x² κ / (2 C_r L))
 
-which makes the steady-state lateral offset zero (the heading error stays at its kinematic
-value). The gain is scheduled on V_x (recomputed when the speed has moved by more than
+makes the steady-state lateral offset zero (the heading error stays at its kinematic value).
+The gain is scheduled on V_x (recomputed when the speed has moved by more than
 ``speed_step_mps``) and the controller reads no clock.
 """
 

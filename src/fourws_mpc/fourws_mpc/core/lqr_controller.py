@@ -1,8 +1,9 @@
-"""``lqr_ff``: the textbook lateral controller (``core.lqr``) behind the MPC's interface.
+"""Runs ``lqr_ff``, the textbook lateral controller (``core.lqr``), behind the MPC's interface.
 
 Same inputs and outputs as :class:`~fourws_mpc.core.controller.MpcController` (a
 :class:`VehicleSample`, the reference, an :class:`MpcResult`), so the node, the in-process
-loop and the recorder treat it as one more preset. One step:
+loop and the recorder treat it as one more preset
+(docs/mpc.md, "The textbook reference `lqr_ff`"). One step:
 
 1. errors at the nearest point (the MPC's own ``Reference``): e1 = e_Y, e2 = e_φ,
    ė1 = v_y + v_x e2, ė2 = r − v_x κ (Rajamani sec. 2.5, linearised);

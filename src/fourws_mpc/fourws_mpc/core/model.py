@@ -1,7 +1,8 @@
-"""3-DOF single-track prediction model of the 4WS vehicle, eq. (1)-(4), with exact Jacobians.
+"""Defines the 3-DOF single-track prediction model, eq. (1)-(4), with exact Jacobians.
 
-State ζ = [ẏ, ẋ, φ, φ̇, Y, X] = [vy, vx, φ, r, Y, X] (:class:`StateIdx`), input
-u = [δf, δr, Mz] (:class:`InputIdx`), SI units (m/s, rad, rad/s, m, N·m).
+The model of the 4WS vehicle (docs/mpc.md, "Model, eq. (1)-(4)"). State
+ζ = [ẏ, ẋ, φ, φ̇, Y, X] = [vy, vx, φ, r, Y, X] (:class:`StateIdx`), input u = [δf, δr, Mz]
+(:class:`InputIdx`), SI units (m/s, rad, rad/s, m, N·m).
 
 Nonlinear model, eq. (1), with per-tyre cornering stiffnesses C_cf, C_cr (two tyres per axle,
 hence the factor 2) and linear tyres::
@@ -17,24 +18,21 @@ hence the factor 2) and linear tyres::
 Deviations from the printed paper (see ``docs/mpc.md``, "Deviations from the paper"):
 
 * eq. (1) writes Mz inside ``2/Iz [...]``; the yaw moment enters as Mz/Iz (implemented).
-* The printed B_t drops the factor 2 and the sign of the rear-steer yaw term; the Jacobians
-  here are derived from eq. (1) analytically: ∂v̇y/∂δf = 2C_cf/m, ∂v̇y/∂δr = 2C_cr/m,
+* The printed B_t drops the factor 2 and the sign of the rear-steer yaw term, and the printed
+  A_t has slips (a missing factor 2 in the ẍ row, the Y/X rows with swapped vy/vx columns);
+  A_t and B_t here are the exact Jacobians of eq. (1): ∂v̇y/∂δf = 2C_cf/m, ∂v̇y/∂δr = 2C_cr/m,
   ∂ṙ/∂δf = 2aC_cf/Iz, ∂ṙ/∂δr = −2bC_cr/Iz, ∂ṙ/∂Mz = 1/Iz (tested against central finite
   differences of :func:`dynamics`).
-* The printed A_t has several slips (a missing factor 2 in the ẍ row, the Y/X rows with
-  swapped vy/vx columns); A_t here is the exact Jacobian of eq. (1).
 * The longitudinal slip ratios S_f, S_r are parameters (default 0: the speed is held by the
-  PID of eq. (24), which the lateral MPC does not model).
-* vx is floored at ``min_speed_mps`` inside the slip angles (assumption (5) of section 2).
+  PID of eq. (24), which the lateral MPC does not model); vx is floored at ``min_speed_mps``
+  inside the slip angles (assumption (5) of section 2).
 
 Linearisation and discretisation, eq. (3)-(4), with an affine term so that the model is exact
-at the operating point (ζ0, u0)::
+at the operating point (ζ0, u0) (the paper's eq. (3)-(4) keep it implicitly as ζ̄(t))::
 
     ζ̇ ≈ f(ζ0, u0) + A_t (ζ − ζ0) + B_t (u − u0)
     ζ(k+1) = A_k ζ(k) + B_k u(k) + d_k,   A_k = I + T A_t,  B_k = T B_t,
     d_k = T [f(ζ0, u0) − A_t ζ0 − B_t u0]                                   # eq. (4)
-
-(The paper's eq. (3)-(4) keep the same constant term implicitly as ζ̄(t).)
 """
 
 from __future__ import annotations

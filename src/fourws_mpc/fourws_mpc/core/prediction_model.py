@@ -1,4 +1,4 @@
-"""The model seam: what the MPC needs of its prediction model, and the models behind it.
+"""Defines the model seam: what the MPC needs of its prediction model, and the models behind it.
 
 A prediction model turns an operating point into the affine discrete model of eq. (4)::
 
@@ -6,10 +6,11 @@ A prediction model turns an operating point into the affine discrete model of eq
 
 (:meth:`PredictionModel.discretise`); the QP condenses it over the horizon (``qp``). Models
 are chosen by name (:data:`PREDICTION_MODELS`, parameter ``prediction_model``) or injected
-into :class:`~fourws_mpc.core.controller.MpcController` directly. A model's state may extend
-ζ of eq. (1) by states appended after ``StateIdx.X`` (``n_state``; :meth:`measured_state`
-builds it from the measured ζ and the measured road-wheel angles, and estimates what is not
-measured from a memory the caller carries from step to step and commits).
+into :class:`~fourws_mpc.core.controller.MpcController` directly
+(docs/architecture.md, "Seams"). A model's state may extend ζ of eq. (1) by states appended
+after ``StateIdx.X`` (``n_state``; :meth:`measured_state` builds it from the measured ζ and
+the measured road-wheel angles, and estimates what is not measured from a memory the caller
+carries from step to step and commits).
 
 Discretisation of the linearisation ζ̇ ≈ A_t ζ + B_t u + c, c = f(ζ0, u0) − A_t ζ0 − B_t u0
 (parameter ``prediction_discretisation``):

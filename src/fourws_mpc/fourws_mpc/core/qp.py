@@ -1,48 +1,43 @@
-"""Augmented Δu MPC of eq. (5)-(6), cost eq. (16)-(19), constraints eq. (20), condensed to one QP.
+"""Condenses the Δu MPC, eq. (5)-(6), cost eq. (16)-(19) and constraints eq. (20), into one QP.
 
-Augmented model, eq. (5), with the affine term of the linearisation (``model.discretise``)::
+Augmented model, eq. (5), with the affine term of the linearisation (``model.discretise``;
+docs/mpc.md, "The QP")::
 
     ξ = [ζ; u(k−1)] (9),  Ã = [[A_k, B_k], [0, I]],  B̃ = [[B_k], [I]],  d̃ = [d_k; 0]
     ξ(k+1) = Ã ξ(k) + B̃ Δu(k) + d̃
 
 The state dimension is the model's (taken from A_k: 6 for eq. (1), 8 with the steering
 actuators of ``actuator_model``, whose states follow ``StateIdx.X``), so ξ has n + 3 entries;
-the output rows and the sparsity pattern of one (Np, Nc) do not depend on it.
-
-Prediction over i = 1..Np with Δu(k+j) = 0 for j ≥ Nc, eq. (6) plus the affine column::
+the output rows and the sparsity pattern of one (Np, Nc) do not depend on it. Prediction over
+i = 1..Np with Δu(k+j) = 0 for j ≥ Nc, eq. (6) plus the affine column::
 
     y(k+i) = C Ã^i ξ(k) + Σ_{j<min(i,Nc)} C Ã^{i−1−j} B̃ Δu(k+j) + Σ_{m<i} C Ã^m d̃
     Y = Ψ ξ + Θ ΔU + Γ d̃
 
 C picks the rows [φ, Y, vy, r] of ξ: φ and Y are the outputs of eq. (5) (cost and soft bounds),
-vy and r carry the hard bounds. The matrix powers Ã^0..Ã^Np are built by doubling with batched
-``matmul`` (⌈log2 Np⌉ calls), Θ by fancy-indexing the Markov parameters C Ã^m B̃ into a block
-Toeplitz array, Γ by a cumulative sum; no Python loop runs over horizon steps.
+vy and r carry the hard bounds. Ψ, Θ and Γ come from batched matrix powers, with no Python
+loop over horizon steps.
 
 Cost, eq. (16)-(19), with the increments indexed k..k+Nc−1 (the printed eq. (16) sums from
 i = 1 to Nc−1, one increment short; docs/mpc.md, "Deviations from the paper")::
 
     J = Σ_{i=1..Np} ‖y_i − y_ref,i‖²_Q + Σ_{j=0..Nc−1} ‖Δu_j‖²_R + ρ ε²
 
-Beyond the paper, an optional penalty on the input *level* (``input_level_cost``; 0 in the
-paper's cost): S = diag(s_δf, s_δr, s_Mz) on u(k+i) = u(k−1) + Σ_{j≤min(i, Nc−1)} Δu_j over
-i = 0..Np−1 (the plan held after N_c, as the prediction holds it)::
+Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
+by the squared characteristic sizes of ``cost_scaling``).
+
+Beyond the paper (0 in its cost), two optional terms: a penalty on the input *level*
+(``input_level_cost``; docs/mpc.md, "The yaw moment's level"), S = diag(s_δf, s_δr, s_Mz) on
+u(k+i) = u(k−1) + Σ_{j≤min(i, Nc−1)} Δu_j (the plan held after N_c, as the prediction holds it)::
 
     J += Σ_{i=0..Np−1} ‖u(k+i)‖²_S
 
-It pins an input direction the increment-only cost leaves free (a yaw moment held by
-counter-steer: no motion, no cost; docs/mpc.md, "The yaw moment's level").
+and a terminal cost (``terminal_cost``; docs/mpc.md, "A terminal cost"), the infinite-horizon
+LQR's cost-to-go in velocity form, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref; Y − Y_ref].
 
-Beyond the paper, an optional terminal cost (``terminal_cost``): the infinite-horizon LQR's
-cost-to-go in velocity form at the horizon's end, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref;
-Y − Y_ref] (``terminal_cost.py``); 0 in the paper's cost.
-
-Q = diag(q_φ, q_Y) and R = diag(r_δf, r_δr, r_Mz) are the *effective* weights (already divided
-by the squares of the characteristic sizes of the cost scaling, see ``cost_scaling.py``). The QP
-variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
-increment is in [−1, 1] and the problem is well scaled; ε ≥ 0 is one dimensionless slack.
-
-Constraints, eq. (20) and section 3.1.5 (rows of the constraint matrix, in this order)::
+The QP variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
+increment is in [−1, 1]; ε ≥ 0 is one dimensionless slack. Constraints, eq. (20) and section
+3.1.5 (rows of the constraint matrix, in this order)::
 
     −1 ≤ Δũ_j ≤ 1                         (0 ≤ Δũ ≤ 0 for a disabled input: δr or Mz ≡ 0)
     0 ≤ ε
@@ -51,11 +46,11 @@ Constraints, eq. (20) and section 3.1.5 (rows of the constraint matrix, in this 
                                           for i ≥ ``state_bounds_from_step``
     |φ_i − φ_ref,i| ≤ b_φ (1 + ε),  |Y_i − Y_ref,i| ≤ b_Y (1 + ε)     soft, eq. (20)
 
-Disabled inputs keep their columns and are pinned by equal bounds, so every controller shares
-one sparsity pattern per (Np, Nc) (:class:`QpLayout`, built once per pair and kept). Each step
-fills the layout's buffers into a :class:`~fourws_mpc.core.qp_solver.CondensedQp` and hands it
-to the injected solver (the solver seam, ``qp_solver``), warm-started from the shifted previous
-plan; only a solution the solver calls optimal is used (``qp_solver.trusted``).
+Disabled inputs keep their columns, so every controller shares one sparsity pattern per
+(Np, Nc) (:class:`QpLayout`, built once per pair and kept). Each step fills a
+:class:`~fourws_mpc.core.qp_solver.CondensedQp` for the injected solver (``qp_solver``),
+warm-started from the shifted previous plan; only a solution the solver calls optimal is used
+(``qp_solver.trusted``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
-"""The solver seam: a condensed QP, a solver protocol, a status enum, and OSQP behind them.
+"""Defines the solver seam: a condensed QP, a solver protocol, a status enum, and the solvers.
 
-The MPC (``qp.MpcQp``) condenses eq. (16)-(20) into one dense QP in z = [ΔŨ; ε]::
+The MPC (``qp.MpcQp``) condenses eq. (16)-(20) into one dense QP in z = [ΔŨ; ε]
+(docs/mpc.md, "Solver")::
 
     minimise   ½ zᵀ P z + qᵀ z,   P = blockdiag(H, 2ρ)
     subject to lo ≤ A z ≤ hi

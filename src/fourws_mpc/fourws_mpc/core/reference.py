@@ -1,7 +1,8 @@
-"""Reference trajectory: nearest point, path-frame errors and the horizon's reference outputs.
+"""Computes the reference: nearest point, path-frame errors and the horizon's reference outputs.
 
 The reference comes as arrays x, y, yaw, curvature, speed at fine spacing (as in the
-ReferenceTrajectory message); the arc length s is their cumulative chord length.
+ReferenceTrajectory message); the arc length s is their cumulative chord length
+(docs/mpc.md, "Reference and frames").
 
 Nearest point: every segment p_i → p_{i+1} in a window around the previous index (or all
 segments on the first call, or when the best lies on the window's edge: the project's one
@@ -19,8 +20,7 @@ Reference outputs over the horizon at the preview arc lengths s + vx T i, i = 1.
 * ``frame="path"`` (what the controller uses): coordinates in the frame whose origin is the
   projection point and whose X axis is the path tangent ψ0 there; Y_ref,i is the rotated
   offset, φ_ref,i = ψ_ref,i − ψ0. The vehicle is then at X = 0 (to first order), Y = e_Y,
-  φ = e_φ. A rigid transform of the paper's global frame: the model of eq. (1) is invariant
-  to it, while the linearisation of sin φ / cos φ stays near φ = 0 on any path.
+  φ = e_φ.
 * ``frame="global"``: the paper's Y and φ in the map frame, with φ_ref shifted by a multiple
   of 2π so that it is within π of the vehicle's yaw.
 """

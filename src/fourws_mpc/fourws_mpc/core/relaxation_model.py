@@ -1,11 +1,10 @@
-"""Single-track model with the steering lags and the tyres' lateral relaxation.
+"""Extends the single-track model by the steering lags and the tyres' lateral relaxation.
 
 A documented deviation from the paper's assumption (6) and from eq. (1)'s instantaneous tyre
-force (``docs/mpc.md``, "Relaxation-aware prediction"). The plant's tyres build their lateral
-force over a rolling distance σ (Pacejka 2012, §7.2; ``fourws_sim.core.vehicle``): a lag of
-σ/v_x, 13 ms at 60 km/h, as long as the steering lag and not in eq. (1). Here the axle's
-transient slip angle α' is a state, appended after the actuator states of
-``actuator_model``::
+force (``docs/mpc.md``, "Relaxation-aware prediction"): the plant's tyres build their lateral
+force over a rolling distance σ (Pacejka 2012, §7.2; ``fourws_sim.core.vehicle``), a lag of
+σ/v_x. Here the axle's transient slip angle α' is a state, appended after the actuator states
+of ``actuator_model``::
 
     ζ_t = [vy, vx, φ, r, Y, X, δf,act, δr,act, α'f, α'r]      (:class:`RelaxIdx`)
     u   = [δf,cmd, δr,cmd, Mz]
@@ -22,14 +21,13 @@ and the forces of eq. (1) act on α' instead of the kinematic slip angles::
 with α_f = δf,act − (vy + a r)/vx the kinematic slip angle of eq. (1), vx floored at
 ``min_speed_mps`` (whose vx-derivative then vanishes), σ_f, σ_r the relaxation lengths at
 static load (``relaxation_length_front_m``, ``relaxation_length_rear_m``; the plant's MF 5.2
-σ_α0 of ``vehicle.yaml``). With α' = α (σ → 0) this is ``actuator_model``.
+σ_α0 of the car file). With α' = α (σ → 0) this is ``actuator_model``.
 
-α' is not measured; :class:`SlipObserver` estimates it from what is (vy, r, vx and the
-road-wheel angles) by running the same lag on the measured kinematic slip. The lateral force
-it stands for, F_y = 2 C α' per axle, is the "estimated F_y" a car without force sensors has.
-
-Jacobians are exact (tested against central finite differences of :func:`dynamics`); the
-rows of the actuator and position states are those of ``actuator_model`` and ``model``.
+α' is not measured: :class:`SlipObserver` estimates it by running the same lag on the measured
+kinematic slip (from vy, r, vx and the road-wheel angles); F_y = 2 C α' per axle is the
+"estimated F_y" a car without force sensors has. Jacobians are exact (tested against central
+finite differences of :func:`dynamics`); the rows of the actuator and position states are
+those of ``actuator_model`` and ``model``.
 """
 
 from __future__ import annotations

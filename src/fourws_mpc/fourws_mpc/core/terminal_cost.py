@@ -1,7 +1,7 @@
-"""The LQR cost-to-go after the horizon, in velocity form, as the MPC's terminal cost
-(beyond eq. 16; ``terminal_cost: lqr``; docs/mpc.md, "A terminal cost").
+"""Computes the MPC's terminal cost: the LQR cost-to-go after the horizon, in velocity form.
 
-Over the lateral states x_L (all but v_x and X) and the enabled inputs::
+Beyond eq. 16 (``terminal_cost: lqr``; docs/mpc.md, "A terminal cost"). Over the lateral
+states x_L (all but v_x and X) and the enabled inputs::
 
     z = [Δx_L − Δx_L,ref; φ − φ_ref; Y − Y_ref],   z(k+1) = A_z z(k) + B_z Δu(k),
     A_z = [[A_L, 0], [C_L A_L, I]],   B_z = [[B_L], [C_L B_L]]

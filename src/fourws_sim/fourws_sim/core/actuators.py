@@ -1,6 +1,7 @@
-"""Actuators: four in-wheel motors, eq. (32), and the front and rear steering actuators.
+"""Models the four in-wheel motors, eq. (32), and the front and rear steering actuators.
 
-In-wheel motor, eq. (32): actual torque T_m follows the command T_md through
+In-wheel motor, eq. (32) (docs/plant.md, "Vehicle"): actual torque T_m follows the command T_md
+through
 
     G(s) = T_m / T_md = 1 / (2τ² s² + 2τ s + 1),      τ = 0.02 s (Table 5)
 

@@ -1,21 +1,19 @@
-"""A localisation filter between the sensors and the controllers (beyond the paper).
+"""Filters the sensors' pose for the controllers: a localisation filter (beyond the paper).
 
-A car's controllers do not take the raw position fix: a localisation filter (Autoware's
-``ekf_localizer``, an INS's own fusion) dead-reckons with the odometry and corrects towards
-the fix. :class:`PoseFilter` is that filter for the bench: an extended Kalman filter that
-knows the sensors' error models (their data sheets: the σ and τ of every channel in
-``fourws_sim.core.sensing``), used by every controller alike when a condition asks for it
-(``localisation: ekf``).
+:class:`PoseFilter`, an extended Kalman filter used by every controller alike when a condition
+asks for it (``localisation: ekf``; docs/plant.md, "Sensing and localisation"), dead-reckons
+with the odometry and corrects towards the fix, knowing the sensors' error models (the σ and τ
+of every channel in ``fourws_sim.core.sensing``).
 
 State: the pose p = [x, y, ψ] in the world frame and, for each measured channel whose error
 is Gauss-Markov (τ > 0), that error b_c as a state of its own (:data:`FILTERED_CHANNELS`
 order). A white error is process noise on what it is integrated into (odometry channels) or
 measurement noise (fix channels).
 
-Prediction over one period T, from step k−1 to step k, with the odometry of both ends of
-the period, bias-corrected (v̂_x = v_x,m − b_vx, v̂_y = v_y,m − b_vy, r̂ = r_m − b_r; a channel
-without a bias state uses its measurement) — the trapezoidal rule, second-order exact, so
-the estimate does not lag the odometry by half a period::
+Prediction over one period T, from step k−1 to step k, with the bias-corrected odometry of
+both ends of the period (v̂_x = v_x,m − b_vx, v̂_y = v_y,m − b_vy, r̂ = r_m − b_r; a channel
+without a bias state uses its measurement), by the trapezoidal rule (second-order exact, so
+the estimate does not lag the odometry by half a period)::
 
     ψ⁺ = ψ + T (r̂_k−1 + r̂_k) / 2
     p⁺ = p + T (w(ψ, v̂_k−1) + w(ψ⁺, v̂_k)) / 2,   w(ψ, v) = R(ψ) [v_x, v_y]  (world frame)
@@ -23,10 +21,8 @@ the estimate does not lag the odometry by half a period::
 
 A white odometry error enters through both ends of the period (process noise
 G_k−1 Σ G_k−1ᵀ + G_k Σ G_kᵀ; the correlation it leaves between consecutive periods is
-neglected).
-
-Measurement: the fix z = [x_m, y_m, ψ_m] = [x + b_x, y + b_y, ψ + b_ψ] + white; the heading
-innovation is wrapped to (−π, π].
+neglected). Measurement: the fix z = [x_m, y_m, ψ_m] = [x + b_x, y + b_y, ψ + b_ψ] + white;
+the heading innovation is wrapped to (−π, π].
 
 The filter's output replaces the measured x, y, ψ and, for the channels with a bias state,
 the measured v_x, v_y, r by their bias-corrected values. It starts with the run (prior: the

@@ -1,8 +1,7 @@
-"""Compiled twin of the plant's right-hand side: ``TwoTrackModel.derivatives`` with numba.
+"""Evaluates the plant's right-hand side compiled: ``TwoTrackModel.derivatives`` in numba.
 
-The equations, symbols and signs are those of ``vehicle.py``'s module docstring (two-track
-body, load transfer through the lagged accelerations, transient slip angles, motors and
-steering actuators) with the combined-slip tyre of ``tyre.py`` (:func:`tyre.forces_scalar`).
+The equations, symbols and signs are those of ``vehicle.py``'s module docstring, with the
+combined-slip tyre of ``tyre.py`` (:func:`tyre.forces_scalar`); docs/plant.md, "Simulator".
 Every value is computed with the operations of the plain-float code in the same order,
 ``fastmath`` off, so the compiled results equal the readable reference (in practice bit for
 bit; both call the C library's transcendental functions). ``TwoTrackModel.derivatives`` and
@@ -12,21 +11,18 @@ Two things differ from the plain-float code, neither in the values:
 
 * the four wheels' transcendental functions are evaluated layer by layer (the four slip
   angles' atan, then the four relaxation lengths' atan, then their sin, ...) instead of
-  wheel by wheel, so the CPU overlaps the four independent calls (twice as fast);
-* divisions follow numpy's error model (no ``ZeroDivisionError``, no reference counting in
-  the hot loop). No divisor can be zero for a finite state: slip denominators are floored
-  at v_min > 0, σ at ``SIGMA_MIN_M``, the tyre divides by D > 0 and ρ ≥ 1e-12 (the lifted
-  wheel's and the zero-slip branch's values are computed but not used, as in
-  ``forces_scalar``'s early returns).
+  wheel by wheel, so the CPU overlaps the four independent calls;
+* divisions follow numpy's error model (no ``ZeroDivisionError``). No divisor can be zero
+  for a finite state: slip denominators are floored at v_min > 0, σ at ``SIGMA_MIN_M``, the
+  tyre divides by D > 0 and ρ ≥ 1e-12 (the lifted wheel's and the zero-slip branch's values
+  are computed but not used, as in ``forces_scalar``'s early returns).
 
 Arrays instead of tuples: the state ``y`` (26,) in ``vehicle.State`` order, the command
 ``u`` (6,) = (δf_cmd, δr_cmd, T_FL, T_FR, T_RL, T_RR) already clipped, the road ``mu`` (4,),
 the constants ``c`` of :func:`model_constants` (built once per vehicle) and the wheel table
 ``wt`` (:data:`N_ROWS`, 4): per-wheel quantities, one row each (``FZ``, ``FX``, ...),
 columns FL FR RL RR; scratch and outputs (loads, forces, slip angles) of one evaluation.
-
-Compiled with ``cache=True``: the machine code is kept on disk (``__pycache__`` or
-``NUMBA_CACHE_DIR``), so only the first import on a machine pays the compilation.
+Compiled with ``cache=True`` (machine code on disk: ``__pycache__`` or ``NUMBA_CACHE_DIR``).
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
-"""Reference paths: arrays x, y, yaw, curvature, s, speed sampled every ≤ 0.05 m.
+"""Builds reference paths: arrays x, y, yaw, curvature, s, speed sampled every ≤ 0.05 m.
 
-Every path starts with a straight (or asymptotically straight) lead-in at X = ``x_start_m``
-(default −20 m) and ends with a lead-out, so the car starts and ends on straight road. The
-heading ``yaw`` is continuous (unwrapped), in rad, CCW from X; curvature in 1/m, positive to
-the left; ``s`` the arc length from the first sample.
+The scenarios' path types (docs/plant.md, "Reference paths"). Every path starts with a
+straight (or asymptotically straight) lead-in at X = ``x_start_m`` (default −20 m) and ends
+with a lead-out, so the car starts and ends on straight road. The heading ``yaw`` is
+continuous (unwrapped), in rad, CCW from X; curvature in 1/m, positive to the left; ``s`` the
+arc length from the first sample.
 
-1. ``tanh_dlc``: the "double shifting line" of the literature (docs/plant.md, "Reference paths")::
+1. ``tanh_dlc``: the "double shifting line" of the literature::
 
        z_i = shape/dx_i (X/σ − Xs_i) − shape/2,      k_i = shape/dx_i
        Y   = dy1/2 (1 + tanh z1) − dy2/2 (1 + tanh z2)
@@ -26,9 +27,8 @@ the left; ``s`` the arc length from the first sample.
    the smallest steepness that keeps the car's body inside the cones of the lanes on both
    sides when the centre line is followed exactly: |Y − Y_lane| ≤ (lane width − w)/2 at the
    lane ends next to the step (about h/2 (1 − tanh(k d)) at a distance d from the step
-   centre; solved numerically with the other step's tail included).
-   (Lane centre-lines joined by smooth transitions confined to the gaps would demand about
-   13 m/s² at 80 km/h; the cones allow the transitions to begin inside the lanes.)
+   centre; solved numerically with the other step's tail included). The transitions begin
+   inside the lanes (confined to the gaps they would demand about 13 m/s² at 80 km/h).
 
 3. ``circle``: lead-in straight, clothoid (curvature linear in s) over ``transition_m``,
    then an arc of radius R over ``arc_deg`` (to the left, or right with ``direction``),
@@ -46,9 +46,6 @@ the left; ``s`` the arc length from the first sample.
    12.5 m; 5 exit lane 12 m, max(1.3w + 0.25, 3), its right edge on the entry lane's right
    edge. One tanh step per gap, centred in it, each as gentle as the cones allow the body
    (:func:`cone_steepness`), with ``cone_margin_m`` to spare at the lane ends.
-
-``iso3888`` and ``iso3888_2`` carry their cone lanes (``ReferencePath.lanes``), which the
-limit bench checks the car's body against.
 
 ``speed`` is the scenario speed, or a piecewise-linear profile in X
 (``speed_profile_kmh: [[x_m, v_kmh], ...]``).

@@ -1,13 +1,14 @@
-"""What the plant starts from and what it reports: :class:`InitialState`, :class:`PlantOutputs`.
+"""Defines what the plant starts from and reports: :class:`InitialState`, :class:`PlantOutputs`.
 
 The data the scenario (which builds the initial state and judges the outputs) and the
 simulator (which starts from the one and produces the other) share; neither module imports
-the other for them.
+the other for them (docs/plant.md).
 
 ``PlantOutputs`` holds every field of the VehicleState message (SI units): accelerations are
 accelerometer-style body-frame CG accelerations a_x = v̇x − v_y r, a_y = v̇y + v_x r; the
 per-wheel ``fx``/``fy`` are tyre forces in each wheel's own frame; ``yaw`` is continuous
 (not wrapped), like the paths' heading. Wheel arrays follow ``fourws_common.wheels.Wheel``.
+The message's fields: docs/graph.md, "Interfaces".
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""Compiled fixed-step RK4 of the plant (numba): the simulator's inner loop.
+"""Integrates the plant by compiled fixed-step RK4 (numba): the simulator's inner loop.
 
 Classical RK4 on the compiled right-hand side :func:`fourws_sim.core.model_jit.derivatives`
 (the equations of ``vehicle.py``), in the order of operations of the plain-Python loop it
-replaces (kept as ``Simulator(jit=False)``, the tests' oracle)::
+replaces (kept as ``Simulator(jit=False)``, the tests' oracle; docs/plant.md, "Simulator")::
 
     k1 = f(y),  k2 = f(y + h/2 k1),  k3 = f(y + h/2 k2),  k4 = f(y + h k3)
     y ← y + h/6 (k1 + 2 (k2 + k3) + k4)

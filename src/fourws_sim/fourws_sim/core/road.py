@@ -1,6 +1,7 @@
-"""Road adhesion: μ under each wheel's contact point.
+"""Gives the road adhesion μ under each wheel's contact point.
 
-Three kinds, built from a scenario's ``road:`` mapping by :func:`road_from_mapping`:
+Three kinds, built from a scenario's ``road:`` mapping by :func:`road_from_mapping`
+(docs/plant.md, "Scenarios"):
 
 * ``constant``     {type: constant, mu: 0.5}
 * ``piecewise_x``  {type: piecewise_x, x_m: [x1, x2, ...], mu: [μ0, μ1, μ2, ...]}:

@@ -1,6 +1,7 @@
-"""Scenarios: a road, a reference path, a speed, a vehicle and an initial state, from YAML.
+"""Builds a scenario from YAML: a road, a reference path, a speed, a vehicle, an initial state.
 
-A scenario file (``config/scenarios/<name>.yaml``; people's units, converted here)::
+A scenario file (``config/scenarios/<name>.yaml``; people's units, converted here;
+docs/plant.md, "Scenarios")::
 
     name: dlc_60_mu05
     description: ...
@@ -12,17 +13,16 @@ A scenario file (``config/scenarios/<name>.yaml``; people's units, converted her
     initial: {x_m: 0, y_m: 0, yaw_deg: 0, speed_kmh: 60}   # speed defaults to speed_kmh
     # or {on_path: true, x_m: 0}: start on the path sample nearest to (x_m, y_m), with its
     # heading (a tanh path is 2 mm off Y = 0 at X = 0: this keeps that out of the errors)
-    vehicle: {mass_kg: 800}            # optional overrides merged over vehicle.yaml
+    vehicle: {mass_kg: 800}            # optional overrides merged over the car file
     allow_over_mu: false
 
-When a run is aborted (the car left the road or spins) is not the scenario's business: the
-limits are the plant's parameters (``plant.yaml``: ``abort_lateral_error_m``,
-``abort_sideslip_deg``; :class:`AbortLimits`), read by the plant node and the in-process loop
-alike, and :meth:`Scenario.check_end` takes them.
+When a run is aborted (the car left the road or spins) is the plant's parameters, not the
+scenario's (``plant.yaml``: ``abort_lateral_error_m``, ``abort_sideslip_deg``;
+:class:`AbortLimits`), which :meth:`Scenario.check_end` takes.
 
-Drivability (docs/plant.md): the path's peak lateral-acceleration demand max κ v² is
-computed at the scenario's speed profile and compared with μ g, μ the lowest adhesion on the
-road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
+Drivability (docs/plant.md, "Drivability"): the path's peak lateral-acceleration demand
+max κ v² is computed at the scenario's speed profile and compared with μ g, μ the lowest
+adhesion on the road; a demand above μ g raises ``ValueError`` unless ``allow_over_mu: true``.
 :meth:`Scenario.summary` gives the one-line statement to print with every run.
 """
 

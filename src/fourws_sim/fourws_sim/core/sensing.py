@@ -1,6 +1,7 @@
-"""Sensing and timing of a realistic bench: seeded measurement noise and command delays.
+"""Models a realistic bench's sensing and timing: seeded measurement noise and command delays.
 
-Measurement error per channel (what the controllers receive instead of the plant's state):
+Measurement error per channel (what the controllers receive instead of the plant's state;
+docs/plant.md, "Sensing and localisation"):
 
 * white: n_k ~ N(0, σ²), independent per sample;
 * first-order Gauss-Markov with correlation time τ (a slowly wandering localisation error),

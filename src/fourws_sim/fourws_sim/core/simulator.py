@@ -1,29 +1,28 @@
-"""The plant: vehicle model + road + actuators, stepped with fixed-step RK4.
+"""Steps the plant (vehicle model, road, actuators) with fixed-step RK4.
 
 ``Simulator.step`` holds the commands (δf, δr, four wheel torques) constant for ``dt_s``
 (zero-order hold, as a 100 Hz controller does) and integrates the 26-state model of
 ``vehicle.py`` with classical RK4 at ``substep_s`` (default 1 ms; ``dt_s`` must be an integer
-multiple; from 2.5 ms up the wheel-spin mode goes unstable at low speed, see ``vehicle.py``).
-Commands outside the actuator limits are clipped (``last_clipped`` names the
-channels, for the node to warn); non-finite commands raise ``ValueError``. The road μ under
-each wheel is sampled at the start of each substep.
+multiple; from 2.5 ms up the wheel-spin mode goes unstable at low speed, see ``vehicle.py``);
+docs/plant.md, "Simulator". Commands outside the actuator limits are clipped (``last_clipped``
+names the channels, for the node to warn); non-finite commands raise ``ValueError``. The road
+μ under each wheel is sampled at the start of each substep.
 
 The integration runs compiled (numba, ``rk4.py`` on ``model_jit.py``): the equations and the
 order of operations of the plain-float :meth:`TwoTrackModel.derivatives
 <fourws_sim.core.vehicle.TwoTrackModel.derivatives>` and of the plain-Python RK4 loop, which
-``jit=False`` still runs (the reference the tests compare the compiled path with; over ten
-times slower). On a uniform road one compiled call integrates a whole control period (with a
-steering dead time: each run of substeps with the same delayed command); a μ that changes
-between substeps (``road.uniform`` False) is looked up in Python before each substep. A
-fixed order of operations throughout, so two runs with the same inputs give bit-identical
-outputs. Time is the integer count of substeps times the substep, rounded to 1e-12 s, so the
-10 ms grid has no accumulated drift.
+``jit=False`` still runs (the reference the tests compare the compiled path with). On a
+uniform road one compiled call integrates a whole control period (with a steering dead time:
+each run of substeps with the same delayed command); a μ that changes between substeps
+(``road.uniform`` False) is looked up in Python before each substep. A fixed order of
+operations throughout, so two runs with the same inputs give bit-identical outputs. Time is
+the integer count of substeps times the substep, rounded to 1e-12 s, so the 10 ms grid has no
+accumulated drift.
 
 Initial state: the scenario's position, heading and speed, v_y = r = 0, wheels rolling
 freely (ω = v/R), actuators at rest (zero torque, zero steer), no load transfer, transient
-slip angles at their steady values.
-
-The initial state and the outputs are :class:`~fourws_sim.core.plant_io.InitialState` and
+slip angles at their steady values. The initial state and the outputs are
+:class:`~fourws_sim.core.plant_io.InitialState` and
 :class:`~fourws_sim.core.plant_io.PlantOutputs` (``plant_io.py``).
 """
 

@@ -1,6 +1,6 @@
-"""Magic Formula tyre: pure longitudinal and lateral slip, combined slip by a friction ellipse.
+"""Computes Magic Formula tyre forces: pure slip, and combined slip by a friction ellipse.
 
-Pure slip (Pacejka's Magic Formula, shifts and camber omitted)::
+Pure slip (Pacejka's Magic Formula, shifts and camber omitted; docs/plant.md, "Tyres")::
 
     F0(x) = D sin(C atan(B x − E (B x − atan(B x))))
     D = μ F_z λ(F_z)            peak force: the road's adhesion coefficient μ times the load,
@@ -16,25 +16,22 @@ depend on μ (MF convention: μ scales D, and B follows so that B·C·D = K):
     K_κ(F_z) = c_κ F_z                                          longitudinal slip stiffness, N
 
 p_Ky1 differs between the front and the rear tyres (``VehicleParams``); everything else is
-shared. The cap λ ≤ 1 departs from MF, where a tyre lighter than F_z0 would get a friction
-coefficient above p_Dy1: here the road's μ is the tyre-road peak friction and no tyre exceeds
-μ F_z (the torque allocation of eq. 25-31 assumes exactly that bound), while heavily loaded
-tyres lose some friction as real tyres do (the default p_D2 = 0 keeps D = μ F_z exactly; see
-vehicle.yaml). Because B·x_peak is a constant u* of C and E alone (the root of
-C atan(u − E(u − atan u)) = π/2), the peak slips are x_peak = u* C D / K: they scale with μ
-and with F_z / K(F_z).
+shared. The cap λ ≤ 1 departs from MF (where a tyre lighter than F_z0 would get a friction
+coefficient above p_Dy1): no tyre exceeds μ F_z, the bound the torque allocation of eq. 25-31
+assumes (the default p_D2 = 0 keeps D = μ F_z exactly; see the car file). Because B·x_peak is
+a constant u* of C and E alone (the root of C atan(u − E(u − atan u)) = π/2), the peak slips
+are x_peak = u* C D / K: they scale with μ and with F_z / K(F_z).
 
 Combined slip: normalised-slip friction ellipse (the "similarity" idea, Pacejka, *Tire and
-Vehicle Dynamics*, 3rd ed., 2012, ch. 4). With s_x = κ/κ_peak, s_y = α/α_peak and
-ρ = √(s_x² + s_y²)::
+Vehicle Dynamics*, 3rd ed., 2012, ch. 4), not MF's G functions: with μ-scaled peaks their
+fixed coefficients let the resultant exceed μ F_z at low μ by 10 % or more. With
+s_x = κ/κ_peak, s_y = α/α_peak and ρ = √(s_x² + s_y²)::
 
     F_x = (s_x/ρ) F0_x(ρ κ_peak),      F_y = (s_y/ρ) F0_y(ρ α_peak)
 
 Properties (each one is tested): pure slip is reproduced exactly; at small slip
-F_x = K_κ κ and F_y = K_α α (the linear stiffnesses are not reduced by the other slip);
-the resultant never exceeds D ≤ μ F_z, since F0 ≤ D and (s_x/ρ)² + (s_y/ρ)² = 1. The MF
-combined-slip weighting functions G were not used because, with μ-scaled peaks, their
-fixed coefficients let the resultant exceed μ F_z at low μ by 10 % or more.
+F_x = K_κ κ and F_y = K_α α (the linear stiffnesses are not reduced by the other slip); the
+resultant never exceeds D ≤ μ F_z, since F0 ≤ D and (s_x/ρ)² + (s_y/ρ)² = 1.
 
 Slips (wheel frame, x along the wheel's heading, y to its left)::
 
@@ -43,13 +40,11 @@ Slips (wheel frame, x along the wheel's heading, y to its left)::
 
 so that F_y > 0 (to the left) when the contact point slides to the right (ISO 8855; with
 eq. (1) of the paper α_f = δ_f − (v_y + a r)/v_x). The floor v_min keeps both finite at
-standstill; it also bounds the wheel-spin eigenvalue −R² K_κ / (I_w v_min), which the fixed
-RK4 step must resolve (see ``vehicle.py``).
+standstill and bounds the wheel-spin eigenvalue −R² K_κ / (I_w v_min) (see ``vehicle.py``).
 
-Two implementations of the same equations: :func:`forces` (numpy, vectorised over any
-shape, for analysis and tests) and :func:`forces_scalar` (plain floats, for the plain-float
-derivative function, where numpy's per-call overhead on 4-element arrays dominates). A unit
-test checks that they agree. The simulator runs a compiled twin of :func:`forces_scalar`
+:func:`forces` (numpy, vectorised over any shape, for analysis and tests) and
+:func:`forces_scalar` (plain floats, for the plain-float derivative function) compute the same
+equations (a unit test checks); the simulator runs a compiled twin of :func:`forces_scalar`
 (``model_jit.tyre_forces``, checked against it by another test).
 """
 

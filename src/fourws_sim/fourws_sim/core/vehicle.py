@@ -1,14 +1,13 @@
-"""Nonlinear two-track (four-wheel) vehicle model with wheel spin, motors and steering.
+"""Models the vehicle: a nonlinear two-track (four-wheel) model with wheel spin, motors, steering.
 
-Frames and signs follow docs/conventions.md (ISO 8855: x forward, y left, z up; yaw, yaw rate,
-yaw moment and steer angles positive to the left). Wheel order FL, FR, RL, RR
-(``fourws_common.wheels.Wheel``). The parameters are
+The plant's vehicle (docs/plant.md, "Vehicle"). Frames and signs follow docs/conventions.md
+(ISO 8855: x forward, y left, z up; yaw, yaw rate, yaw moment and steer angles positive to the
+left). Wheel order FL, FR, RL, RR (``fourws_common.wheels.Wheel``). The parameters are
 :class:`~fourws_sim.core.vehicle_params.VehicleParams` (``vehicle_params.py``).
 
-States (:class:`State`): body velocities v_x, v_y and yaw rate r; position X, Y and yaw ψ
-(continuous, not wrapped); the four wheel spin rates ω_i; per motor the actual torque T_i
-and its rate Ṫ_i (eq. 32); the actual road-wheel angles δ_f, δ_r; the two filtered CG
-accelerations used for load transfer; the four transient slip angles α'_i.
+States (:class:`State`): v_x, v_y, r; X, Y, ψ (continuous, not wrapped); the wheel spin rates
+ω_i; per motor the actual torque T_i and its rate Ṫ_i (eq. 32); the actual road-wheel angles
+δ_f, δ_r; the two filtered CG accelerations of the load transfer; the transient slip angles α'_i.
 
 Wheel i sits at (x_i, y_i) = (a, +B_f/2), (a, −B_f/2), (−b, +B_r/2), (−b, −B_r/2). Front
 wheels steer by δ_f, rear wheels by δ_r (parallel steer, no Ackermann). Contact-point velocity
@@ -17,7 +16,9 @@ slips and tyre forces (F_x,i, F_y,i) in the wheel frame from ``tyre.py``; back t
 
     F_X,i = F_x,i cos δ_i − F_y,i sin δ_i,      F_Y,i = F_x,i sin δ_i + F_y,i cos δ_i
 
-Body dynamics (m includes the wheels; a_x, a_y are the accelerometer-style CG accelerations)::
+Body dynamics (m includes the wheels; a_x, a_y are the accelerometer-style CG accelerations;
+rolling resistance acts on the body, so the reported F_x,i stay the pure tyre forces, and its
+tanh makes it vanish smoothly at standstill)::
 
     m a_x = Σ F_X,i − ½ ρ c_d A v_x|v_x| − f_r m g tanh(v_x / v_rr)
     m a_y = Σ F_Y,i
@@ -25,9 +26,6 @@ Body dynamics (m includes the wheels; a_x, a_y are the accelerometer-style CG ac
     I_z ṙ = Σ (x_i F_Y,i − y_i F_X,i)
     Ẋ = v_x cos ψ − v_y sin ψ,   Ẏ = v_x sin ψ + v_y cos ψ,   ψ̇ = r
     I_w ω̇_i = T_i − R F_x,i
-
-Rolling resistance is applied to the body (it is small, 88 N here, and keeps the reported
-tyre forces F_x,i the pure tyre forces); its tanh makes it vanish smoothly at standstill.
 
 Vertical loads: quasi-static longitudinal and lateral load transfer from the CG height h,
 the lateral part split between the axles by the front share ε of the roll stiffness (roll
@@ -37,11 +35,9 @@ centres at ground level, i.e. all lateral transfer goes through the springs)::
     ΔF_z,f = ε m h â_y / B_f,                   ΔF_z,r = (1 − ε) m h â_y / B_r
     F_z,FL = F_z,front/2 − ΔF_z,f,  F_z,FR = F_z,front/2 + ΔF_z,f   (likewise rear)
 
-with â_x, â_y the CG accelerations passed through a first-order lag of time constant
-``load_transfer_time_constant_s`` (two states). This avoids the algebraic loop between the
-loads and the accelerations they produce, and stands for the roll and pitch response of the
-sprung mass (a roll mode of ≈ 1.6 Hz and ζ ≈ 0.4 lags by about 2ζ/ω_n ≈ 0.08 s); in steady state
-it equals the quasi-static transfer. Loads are clipped at 0 (wheel lift).
+with â_x, â_y the CG accelerations through a first-order lag of time constant
+``load_transfer_time_constant_s`` (two states; no algebraic loop between the loads and the
+accelerations; in steady state the quasi-static transfer). Loads are clipped at 0 (wheel lift).
 
 Transient lateral slip (Pacejka, "Tire and Vehicle Dynamics", 3rd ed., 2012, §7.2: single
 contact point, first-order lag over a rolling distance σ): the tyre force uses the transient
@@ -50,25 +46,20 @@ slip angle α'_i in place of the kinematic α_i::
     dα'_i/dt = (α_i − α'_i) max(|v_x,i|, v_min) / σ_i
     σ_i = p_Ty1 R sin(2 atan(F_z,i / (p_Ty2 F_z0)))          (MF 5.2 σ_α0, no camber)
 
-p_Ty1 is the peak of σ over the wheel radius, reached at F_z = p_Ty2 F_z0; σ_i is floored at
-0.05 m so the lag stays resolved by the 1 ms RK4 substep at any speed (a lifted wheel has
-no force to lag). Longitudinal slip has no lag (σ_κ is a few centimetres; the wheel-spin
-mode already gives it dynamics). At speed v this is a lag of σ/v (13 ms at 60 km/h with
-σ = 0.22 m) that eq. (1) of the paper does not contain. p_Ty1 = 0 turns it off: α'_i are
-then held at their initial value and not used.
+(p_Ty1 the peak of σ over the wheel radius, reached at F_z = p_Ty2 F_z0), σ_i floored at 0.05 m
+so the 1 ms RK4 substep resolves the lag at any speed. Longitudinal slip has no lag (σ_κ is a
+few centimetres; the wheel-spin mode gives it dynamics). p_Ty1 = 0 turns it off: α'_i are then
+held at their initial value and not used.
 
-Numerics: the wheel-spin mode has the eigenvalue λ ≈ −R² K_κ / (I_w max(|v_x|, v_min))
-(K_κ = c_κ F_z). Fixed-step RK4 at h = 1 ms is stable for |λ| h < 2.78, which with the
-default parameters holds for loads up to ≈ 2 × static at any speed because the slip
-denominator is floored at ``slip_speed_min_mps`` = 2.5 m/s. A 2 ms substep is at the edge
-(measured: still stable accelerating from rest; from 2.5 ms up the wheel-spin mode rings or
-diverges at low speed), so keep the default 1 ms.
+Numerics: the wheel-spin mode λ ≈ −R² K_κ / (I_w max(|v_x|, v_min)) (K_κ = c_κ F_z) needs
+|λ| h < 2.78 for RK4; at h = 1 ms the slip floor ``slip_speed_min_mps`` = 2.5 m/s keeps it
+there for loads up to ≈ 2 × static at any speed. Keep the default 1 ms substep (2 ms is at
+the edge; from 2.5 ms up the wheel-spin mode rings or diverges at low speed).
 
-The derivative function :meth:`TwoTrackModel.derivatives` is written in plain Python floats
-(tuple unpacking in :class:`State` order, no numpy): on 4-element arrays numpy's call overhead
-is larger than the arithmetic, and this function runs 40 times per 10 ms control step. It is
-the readable reference: the simulator runs its compiled twin (``model_jit.py``, numba, the same
-operations in the same order; a unit test checks they agree), ``Simulator(jit=False)`` this one.
+:meth:`TwoTrackModel.derivatives` is plain Python floats (numpy's call overhead on 4-element
+arrays exceeds the arithmetic), the readable reference: the simulator runs its compiled twin
+(``model_jit.py``, the same operations in the same order; a unit test checks they agree) and
+``Simulator(jit=False)`` this one.
 """
 
 from __future__ import annotations

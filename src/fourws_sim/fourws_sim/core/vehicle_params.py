@@ -1,11 +1,11 @@
-"""Vehicle, tyre and actuator parameters of the plant, read from the car file.
+"""Reads the plant's vehicle, tyre and actuator parameters from the car file.
 
 :class:`VehicleParams` is the frozen dataclass (SI, except the ``*_deg`` fields people edit)
 with the quantities derived from it (static loads, tyre coefficients, static cornering
 stiffness, relaxation length, actuator limits, wheel positions); :func:`load_vehicle_params`
 reads a car file (:mod:`fourws_common.vehicle_info`, default the paper's car) and checks its
-recorded derived values. The model
-that uses them is :class:`fourws_sim.core.vehicle.TwoTrackModel`.
+recorded derived values (docs/plant.md, "The car files"). The model that uses them is
+:class:`fourws_sim.core.vehicle.TwoTrackModel`.
 """
 
 from __future__ import annotations

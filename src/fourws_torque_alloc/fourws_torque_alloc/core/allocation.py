@@ -1,9 +1,9 @@
-"""Distribution of the total wheel torque T and the yaw moment M_z over four in-wheel motors.
+"""Distributes the total wheel torque T and the yaw moment M_z over four in-wheel motors.
 
-Wheel order FL, FR, RL, RR (``fourws_common.wheels.Wheel``). ISO 8855 signs: positive M_z
-turns the car left (counter-clockwise seen from above), so the right wheels carry more drive
-torque.
-With equal front and rear track B and wheel radius r the two demands are, eq. (27),
+The paper's eq. (25)-(31) and beyond (docs/lower-layer.md, "Allocation"). Wheel order FL, FR,
+RL, RR (``fourws_common.wheels.Wheel``). ISO 8855 signs: positive M_z turns the car left
+(counter-clockwise seen from above), so the right wheels carry more drive torque. With equal
+front and rear track B and wheel radius r the two demands are, eq. (27),
 
     T_fl + T_fr + T_rl + T_rr = T
     (B/2r)(−T_fl + T_fr − T_rl + T_rr) = M_z,
@@ -16,71 +16,59 @@ which are equivalent to prescribing the two side sums
     Minimise J = Σ F_xi²/(μ_i F_zi)², F_xi = T_i/r (eq. 26; μ_i is the paper's τ_i, the
     road adhesion under wheel i). With c_i = μ_i F_zi the Lagrangian
     J + λ_1(Σ T_i − T) + λ_2((B/2r)Σ s_i T_i − M_z), s_i = −1 left / +1 right, is
-    stationary at T_i = −(r c_i)²(λ_1 + s_i λ_2 B/2r)/2: on each side the torque is split
-    in proportion to c_i². With the side sums above (eq. 28, corrected):
+    stationary at T_i = −(r c_i)²(λ_1 + s_i λ_2 B/2r)/2, the unique minimum (J is a
+    positive-definite diagonal quadratic): on each side the torque is split in proportion to
+    c_i². With the side sums above (eq. 28, corrected):
 
         T_rl = (T/2 − M_z r/B) c_rl² / (c_fl² + c_rl²),   T_fl = T/2 − M_z r/B − T_rl
         T_rr = (T/2 + M_z r/B) c_rr² / (c_fr² + c_rr²),   T_fr = T/2 + M_z r/B − T_rr
 
-    J is a positive-definite diagonal quadratic, so this stationary point is the unique
-    minimum. What the paper prints wrongly:
-      - eq. (28), second line: T_fr = T/2 − M_z r/B − T_rr; eq. (27) gives "+ M_z r/B" for
-        the right side. Eq. (29) inherits the sign, and eq. (31)'s T_rr numerator too.
-      - eq. (30): the first term's denominator is the front wheel's (μ_fl F_zfl r)² (resp.
-        (μ_fr F_zfr r)²), not the rear wheel's; as printed ∂J/∂T_rl = 0 gives T_rl = S_L/2
-        whatever the loads.
-      - eq. (31): the denominators read μ_rl²F_zrl² + μ_rl²F_zrl²; they are
-        μ_fl²F_zfl² + μ_rl²F_zrl² (resp. front-right + rear-right). Implemented as above.
-    The closed form ignores motor limits; each wheel's torque is then clipped to
-    ±motor_torque_max_nm (what the motor would do anyway) and the shortfall reported.
+    What the paper prints wrongly (docs/deviations.md, 4-5): eq. (28)'s second line reads
+    T_fr = T/2 − M_z r/B − T_rr, where eq. (27) gives "+ M_z r/B" (eq. (29) and eq. (31)'s
+    T_rr numerator inherit the sign); eq. (30)'s first denominator is the front wheel's
+    (μ_fl F_zfl r)² (resp. right), not the rear wheel's (as printed ∂J/∂T_rl = 0 gives
+    T_rl = S_L/2 whatever the loads); eq. (31)'s denominators read μ_rl²F_zrl² + μ_rl²F_zrl²
+    and are μ_fl²F_zfl² + μ_rl²F_zrl² (resp. right). Implemented as above.
+    Each wheel's torque is then clipped to ±motor_torque_max_nm and the shortfall reported.
 
 ``optimal_bounded`` — beyond the paper
-    The same objective with per-wheel box bounds |T_i| ≤ b_i,
-        b_i = min(T_motor,max, r √max((μ_i F_zi)² − F_yi², 0)),
-    i.e. the motor limit and the part of the friction circle left over by the tyre's
-    current lateral force (eq. 25 with η_i ≤ 1). Constraints stay separable by side, so the
-    achievable side sums form the rectangle |S_L| ≤ b_fl + b_rl, |S_R| ≤ b_fr + b_rr. When
-    the demand lies outside, ``priority`` decides, lexicographically and exactly:
-      "yaw_moment":   D = S_R − S_L = 2 M_z r/B is first brought as close to its demand
-                      as the rectangle allows; then, with D fixed, S_L is chosen to bring
-                      T = 2 S_L + D as close to its demand as possible.
+    The same objective with |T_i| ≤ b_i, b_i = min(T_motor,max, r √max((μ_i F_zi)² − F_yi², 0)):
+    the motor limit and the friction circle's room left by the tyre's lateral force (eq. 25
+    with η_i ≤ 1). The achievable side sums form the rectangle |S_L| ≤ b_fl + b_rl,
+    |S_R| ≤ b_fr + b_rr; a demand outside it is served by ``priority``, lexicographically and
+    exactly, each stage a 1-D projection onto an interval:
+      "yaw_moment":   D = S_R − S_L = 2 M_z r/B as close to its demand as the rectangle
+                      allows, then, with D fixed, T = 2 S_L + D as close to its demand;
       "total_torque": T = S_L + S_R first, then D with T fixed.
-    Each stage is a 1-D projection onto an interval (closed form). The tyre-usage QP with
-    these achievable (T*, M_z*) as hard equalities is then always feasible; it is solved by
-    OSQP (``bounded_solver = "osqp"``; set up once, P/l/u updated each call, warm start,
-    polishing) or by the exact per-side closed form (``"analytic"``: split ∝ c_i², then the
-    wheel that breaks its bound is pinned at it and its side partner takes the rest).
-    A side whose achievable sum sits at the edge of its range has one feasible point (both
-    wheels at their bounds); it is fixed before OSQP is called, so the QP is never
-    degenerate and polishing recovers the exact active-set solution; the remaining side-sum
-    residual (~1e-13) is moved onto the wheel with the most room. If OSQP does not report
-    "solved" with a successful polish, the analytic solution is used and the status says
-    "solver_fallback" (the two agree to ~1e-11 N·m, unit tests). The unmet parts
-    T − T_achieved and M_z − M_z,achieved are reported.
+    The tyre-usage QP with these achievable (T*, M_z*) as hard equalities is then always
+    feasible. It is solved by OSQP (``bounded_solver = "osqp"``, ``bounded_qp``; a side at
+    the edge of its range is fixed beforehand, so the QP is never degenerate, and the side-sum
+    residual (~1e-13) goes to the wheel with the most room) or by the exact per-side closed
+    form (``"analytic"``: split ∝ c_i², the wheel that breaks its bound pinned at it, its side
+    partner taking the rest). If OSQP does not report "solved" with a successful polish, the
+    analytic solution is used and the status says "solver_fallback" (the two agree to
+    ~1e-11 N·m, unit tests). The unmet parts T − T_achieved and M_z − M_z,achieved are
+    reported.
 
-``rule`` — the ablation's conventional baseline
-    Equal front/rear split of each side sum: T_fl = T_rl = S_L/2, T_fr = T_rr = S_R/2
-    (left/right difference ΔT per side = M_z r/B), clipped to the motor limits.
+``rule`` — the ablation's conventional baseline: each side sum split equally front/rear,
+T_fl = T_rl = S_L/2, T_fr = T_rr = S_R/2 (left/right difference ΔT per side = M_z r/B),
+clipped to the motor limits.
 
 ``equal`` — T/4 per wheel (controllers without DYC), clipped to the motor limits.
 
-``production`` — what a car already does (the fair baseline, beyond the paper)
-    Each side sum is split between the axles by a fixed share: when it drives (S ≥ 0) by
-    static axle load, front share b/L; when it brakes (S < 0) by a production brake balance,
-    front share ``brake_balance_front`` (cars put about 60-70 % of the brake force on the
-    front axle). Clipped to the motor limits.
+``production`` — what a car already does (the fair baseline, beyond the paper): each side sum
+split between the axles by static axle load (front share b/L) when it drives (S ≥ 0) and by
+the production brake balance ``brake_balance_front`` when it brakes (S < 0); clipped to the
+motor limits.
 
 Wheels in the air: a wheel with F_z ≤ min_fz_n (or μ_i F_zi below 1e-3 N) can transmit no
-force: it gets zero weight in ``optimal`` (its side partner takes the whole side sum) and a
-zero bound in ``optimal_bounded``; with both wheels of a side in the air that side's sum is
-unmet and reported. ``rule`` and ``equal`` do not use the loads (as the baselines they
-model). Nothing divides by F_z.
+force: zero weight in ``optimal`` (its side partner takes the whole side sum), a zero bound
+in ``optimal_bounded``; with both wheels of a side in the air that side's sum is unmet and
+reported. ``rule`` and ``equal`` do not use the loads. Nothing divides by F_z.
 
 Inputs are validated: non-finite numbers, a wrong shape, μ outside [0, 3], |F_z| or |F_y|
 above 1e6 N, |T| above demand_sanity_factor × 4 T_motor,max or |M_z| above
-demand_sanity_factor × 2 B T_motor,max / r raise ``ValueError`` (the node then holds its
-last valid output). Outputs are always finite.
-
+demand_sanity_factor × 2 B T_motor,max / r raise ``ValueError``. Outputs are always finite.
 Status strings: "ok", or a comma-separated subset, in this order, of "limited" (some demand
 unmet beyond 1e-9 relative), "wheel_lift" (some wheel's load at or below min_fz_n, reported
 by every method) and "solver_fallback" (see above).
@@ -140,7 +128,7 @@ class AllocatorConfig:
                              "from the measured a_x, a_y (tyre_estimate)", choices=TYRE_SOURCES)
     mu_nominal: float = param(0.8, "estimated: the road adhesion assumed for every wheel",
                               lo=0.01, hi=3.0)
-    # the estimator's vehicle constants: vehicle.yaml's names and values (unit test)
+    # the estimator's vehicle constants: the car file's names and values (unit test)
     mass_kg: float = param(750.0, "estimated: vehicle mass", lo=1.0, hi=1.0e5, unit="kg")
     cg_to_front_axle_m: float = param(1.10, "estimated: CG to front axle a", lo=0.05, hi=10.0,
                                       unit="m")

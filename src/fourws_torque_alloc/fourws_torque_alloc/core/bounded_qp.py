@@ -1,9 +1,10 @@
-"""The OSQP workspace of ``optimal_bounded``'s final split (``allocation``, module docstring).
+"""Holds the OSQP workspace of ``optimal_bounded``'s final split (``allocation``, module docstring).
 
 With the achievable side sums (S_L*, S_R*) fixed by the priority stage, the split that
 minimises the tyre usage Σ (T_i / (r μ_i F_zi))² (eq. 26) under |T_i| ≤ b_i is a 4-variable
 QP with two equalities (eq. 27 rewritten as eq. 28's side sums) and four boxes. It is set up
-once and updated each call (P, l, u; warm start, polishing), as osqp-python recommends.
+once and updated each call (P, l, u; warm start, polishing), as osqp-python recommends
+(docs/lower-layer.md, "Allocation").
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""Longitudinal speed PID, eq. (24): total driving force from the speed error.
+"""Computes the total driving force from the speed error: the longitudinal speed PID, eq. (24).
 
-The paper writes the continuous law (eq. 24)
+The paper writes the continuous law (eq. 24; docs/lower-layer.md, "Speed PID")
 
     F_x = K_p e + K_i ∫ e dt + K_d de/dt,      e = v_ref − v,
 
@@ -8,13 +8,11 @@ and leaves the gains, the discretisation and the actuator limits open. Implement
 at a fixed step ``dt_s`` supplied by the caller (no clock is read):
 
     P_k  = K_p e_k
-    D_k  = −K_d ḋ_k,   ḋ_k = first-order-filtered backward difference of the *measured*
-           speed: ḋ_k = ḋ_{k−1} + (Δv_k/dt − ḋ_{k−1}) dt/(T_f + dt)   (backward Euler of
-           s/(T_f s + 1)); the derivative acts on the measurement, not on the error, so a
-           step of the reference gives no derivative kick (for a constant reference the two
-           agree: de/dt = −dv/dt).
+    D_k  = −K_d ḋ_k,   ḋ_k = ḋ_{k−1} + (Δv_k/dt − ḋ_{k−1}) dt/(T_f + dt), the backward Euler
+           of s/(T_f s + 1) on the *measured* speed: a step of the reference gives no
+           derivative kick (for a constant reference de/dt = −dv/dt)
     FF_k = m a_ref    (optional feed-forward of the reference acceleration; zero when the
-           reference speed is constant, so it never fights the feedback in steady state)
+           reference speed is constant)
     I_k  = integral term in newtons (K_i is inside the state, so a gain change is
            bumpless), forward-Euler: I_{k+1} = I_k + K_i e_k dt (+ anti-windup, below)
     F_k  = sat(P_k + I_k + D_k + FF_k, F_min, F_max),  F_max = T_max,total / r,
@@ -29,28 +27,15 @@ Anti-windup (``anti_windup``):
                        discrete update stable if T_t < dt); integral kept in [F_min, F_max].
     "none"             plain integration (kept for comparison in tests and studies only).
 
-Design of the default gains (m = 750 kg): from force to speed the car is m v̇ = F − c v² −
-f_r m g; linearised at 60–90 km/h the drag pole 2 c v/m is about 0.02–0.03 rad/s, so the
-plant is practically an integrator 1/(m s). With a PI law the closed loop is
-m s² + K_p s + K_i = 0; choosing ω_n = 1 rad/s and ζ = 1 gives K_p = 2 ζ ω_n m =
-1500 N/(m/s) and K_i = ω_n² m = 750 N/m. The open-loop crossover is then ≈ 2.2 rad/s with
-≈ 77° phase margin before the motor lag (eq. 32, τ = 0.02 s: natural frequency 35 rad/s,
-≈ 5° at crossover) and the one-sample delay of the 100 Hz loop (≈ 2°), so ≈ 70° remain; the
-gain margin is > 20 dB. A 300 N disturbance (cornering drag in a lane change) costs about
-0.15 m/s of speed. K_d = 0 by default: derivative action on the speed measurement is
-acceleration feedback, which for an integrator plant only adds apparent mass
-((m + K_d) s² + K_p s + K_i) and passes wheel-speed noise; the term is implemented for
-eq. (24)'s form and can be switched on from the YAML.
-
-Default anti-windup: back-calculation with T_t = 0.1 s (10 samples, ≪ T_i = K_p/K_i = 2 s).
-Simulated on that car with the motor lag, a +30 km/h reference step from 60 km/h saturates
-the motors for ≈ 0.2 s and overshoots 0.3 % of the step, settling (2 %) in 2.3 s; conditional
-integration gives 7 % and no anti-windup 18 %. Note that a small (unsaturated) reference step
-overshoots ≈ 14 % whatever the anti-windup: around an integrator plant the integral term
-must end at the new road load, K_i ∫e dt = ΔF_load (small), so the error area gathered
-during the rise has to be paid back by an overshoot (a type-2 loop). Speed
-references should therefore change as ramps with ``a_ref_mps2`` as feed-forward (the
-scenarios of the paper hold a constant speed).
+Default gains (m = 750 kg): K_p = 1500 N/(m/s) and K_i = 750 N/m (ω_n = 1 rad/s, ζ = 1 on the
+integrator plant 1/(m s)), crossover ≈ 2.2 rad/s, ≈ 70° phase margin after the motor lag and the
+one-sample delay, gain margin > 20 dB; a 300 N disturbance (cornering drag in a lane change)
+costs about 0.15 m/s. K_d = 0 (derivative action on the speed is acceleration feedback, which
+only adds apparent mass and passes wheel-speed noise); the term is there for eq. (24)'s form and
+can be switched on from the YAML. Default anti-windup: back-calculation with T_t = 0.1 s
+(≪ T_i = K_p/K_i = 2 s); a +30 km/h step from 60 km/h overshoots 0.3 % of the step and settles
+(2 %) in 2.3 s. A small unsaturated step overshoots ≈ 14 % whatever the anti-windup (a type-2
+loop), so speed references should change as ramps with ``a_ref_mps2`` as feed-forward.
 """
 
 from __future__ import annotations

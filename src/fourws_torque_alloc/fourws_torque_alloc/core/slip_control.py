@@ -1,8 +1,8 @@
-"""Wheel-slip limiter after the allocation: what a car's ABS and traction control do.
+"""Limits wheel slip after the allocation, as a car's ABS and traction control do.
 
-Beyond the paper (its allocation, eq. 25-31, assumes every wheel delivers its torque). Each
-wheel's longitudinal slip from the measured wheel speed and the car's motion (docs/lower-layer.md,
-"Wheel-slip limiter")::
+Beyond the paper (its allocation, eq. 25-31, assumes every wheel delivers its torque; see
+docs/lower-layer.md, "Wheel-slip limiter"). Each wheel's longitudinal slip from the measured
+wheel speed and the car's motion::
 
     v_i = (v_x − r y_i) cos δ_i + (v_y + r x_i) sin δ_i      (wheel centre along its heading)
     κ_i = (ω_i R − v_i) / max(|v_i|, v_min)
@@ -16,9 +16,9 @@ so it falls to zero at κ_off; a wheel spinning against the car's motion (ω_i v
 torque in that direction. The rear axle brakes select-low, as ABS does: once a rear wheel is
 limited under braking, the other rear wheel brakes no harder, so the axle that holds the car's
 yaw keeps its lateral grip on split μ; the front wheels are limited one by one. Below v_min
-(standstill) nothing is limited. The tyre's longitudinal
-force peaks at |κ| of about 0.05-0.15 and falls slowly beyond, so a wheel held near κ_on keeps
-most of its braking force and, unlike a locked wheel, its lateral force. Pure numpy, SI.
+(standstill) nothing is limited. The tyre's longitudinal force peaks at |κ| of about
+0.05-0.15 and falls slowly beyond, so a wheel held near κ_on keeps most of its braking force
+and, unlike a locked wheel, its lateral force. Pure numpy, SI.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""Per-wheel F_z, F_y and μ without plant truth: what a car's controller can know.
+"""Estimates per-wheel F_z, F_y and μ without plant truth: what a car's controller can know.
 
-From the measured accelerations a_x, a_y (IMU, m/s², ISO body frame) and the controller's own
-nominal vehicle constants (the plant's names, ``vehicle.yaml``):
+The allocator's ``tyre_forces: estimated`` (docs/lower-layer.md, "Tyre data"). From the
+measured accelerations a_x, a_y (IMU, m/s², ISO body frame) and the controller's own nominal
+vehicle constants (the plant's names, the car file):
 
 * **F_z**, static load plus quasi-static load transfer (a rigid body; the roll stiffness
   splits the lateral transfer between the axles)::
@@ -29,7 +30,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class EstimatorParams:
-    """Nominal constants of the estimate (SI; names as in ``vehicle.yaml``)."""
+    """Nominal constants of the estimate (SI; names as in the car file)."""
 
     mass_kg: float
     cg_to_front_axle_m: float
