@@ -161,6 +161,7 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
     domain = lease.domain_id if lease is not None else int(domain_id)
     sup = Supervisor(specs, domain, out_dir / "logs")
     monitor = None
+    ended_normally = False
     t0 = time.monotonic()
     try:
         # Wall time and the real-time factor are the plant's own (its status): from its
@@ -196,11 +197,9 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
                              f"  wall {wall:6.1f} s  RTF {rtf:4.1f}   ")
                 stream.flush()
         outcome = _ended_outcome(rc, read_status_file(status_file), time.monotonic() - t0)
+        ended_normally = True
     except NodeDied as exc:
-        outcome = RunOutcome(False, str(exc).splitlines()[0], time.monotonic() - t0,
-                             monitor.sim_time_s if monitor else 0.0, 0, exc.name,
-                             exit_code=exc.returncode, died_error=exc.last_error)
-        stream.write(f"\n{exc}\n")
+        outcome = _died(exc, time.monotonic() - t0, monitor, stream)
     except KeyboardInterrupt:
         outcome = RunOutcome(False, "interrupted by the user (Ctrl-C)", time.monotonic() - t0,
                              monitor.sim_time_s if monitor else 0.0, 0,
@@ -212,12 +211,29 @@ def run_graph(scenario: str, controller: str, out_dir: Path, *, mode: str = "loc
     finally:
         if monitor is not None:
             monitor.close()
-        sup.stop()
+        codes = sup.stop()
         if lease is not None:
             lease.release()
+    if ended_normally:
+        # A node that failed during the run (the recorder on a full disk) keeps its error
+        # code through the stop: the run's outcome then, whichever exit the loop saw first.
+        failed = [n for n, c in codes.items() if n != plant and c is not None and c > 0
+                  and c not in sup.procs[n].spec.end_codes]
+        if failed:
+            proc = sup.procs[failed[0]]
+            outcome = _died(NodeDied(sup.describe(failed[0]), codes[failed[0]],
+                                     proc.last_lines()), outcome.wall_time_s, monitor, stream)
     if progress:
         stream.write("\n")
     return outcome
+
+
+def _died(exc: NodeDied, wall_s: float, monitor, stream) -> RunOutcome:
+    """The outcome of a run in which a node other than the plant died (said on ``stream``)."""
+    stream.write(f"\n{exc}\n")
+    return RunOutcome(False, str(exc).splitlines()[0], wall_s,
+                      monitor.sim_time_s if monitor else 0.0, 0, exc.name,
+                      exit_code=exc.returncode, died_error=exc.last_error)
 
 
 def _ended_outcome(exit_code: int, status: dict | None, runner_wall_s: float) -> RunOutcome:
