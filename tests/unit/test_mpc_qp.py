@@ -219,6 +219,24 @@ def test_osqp_status_through_its_enum_and_one_trust_rule():
     assert not S.trusted(S.QpStatus.MAX_ITER_REACHED, x, True)
 
 
+def test_osqp_is_imported_by_its_solver_only_and_its_infinity_is_osqps():
+    """A DAQP controller starts without osqp and scipy.sparse (0.1-0.2 s of a node's
+    start); the copy of OSQP's infinity equals osqp's own."""
+    import subprocess
+    import sys
+
+    import osqp
+
+    assert float(osqp.constant("OSQP_INFTY")) == S.OSQP_INFTY
+    code = ("import sys; from fourws_mpc.core.laws import warm_up; "
+            "from fourws_mpc.core.config import MpcConfig; warm_up(MpcConfig()); "
+            "print(sorted(m for m in ('osqp', 'scipy.sparse') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=True).stdout.strip().splitlines()[-1]
+    assert out == "[]"
+
+
 class _RecordingSolver:
     """A solver behind the seam that answers with OSQP and keeps what it was handed."""
 

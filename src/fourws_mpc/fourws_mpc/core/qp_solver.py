@@ -25,18 +25,19 @@ TAC 2022), cold-started: its answer is the exact active-set solution, where OSQP
 from __future__ import annotations
 
 import enum
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
-import osqp
-import scipy.sparse as sp
 from numba import njit
 
 from fourws_common.params import choose
 
-OSQP_INFTY = float(osqp.constant("OSQP_INFTY"))  # OSQP's infinity (1e30)
+#: OSQP's infinity, ``osqp.constant("OSQP_INFTY")`` (a unit test checks); osqp and
+#: scipy.sparse are imported by the OSQP solver only: a DAQP controller starts without them
+OSQP_INFTY = 1e30
 _INF = np.inf
 
 
@@ -55,25 +56,32 @@ class QpStatus(enum.Enum):
     INVALID_DATA = "invalid data"
 
 
-_OSQP_STATUS = {
-    osqp.SolverStatus.OSQP_SOLVED: QpStatus.SOLVED,
-    osqp.SolverStatus.OSQP_SOLVED_INACCURATE: QpStatus.SOLVED_INACCURATE,
-    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE: QpStatus.PRIMAL_INFEASIBLE,
-    osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE_INACCURATE: QpStatus.PRIMAL_INFEASIBLE,
-    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE: QpStatus.DUAL_INFEASIBLE,
-    osqp.SolverStatus.OSQP_DUAL_INFEASIBLE_INACCURATE: QpStatus.DUAL_INFEASIBLE,
-    osqp.SolverStatus.OSQP_MAX_ITER_REACHED: QpStatus.MAX_ITER_REACHED,
-    osqp.SolverStatus.OSQP_TIME_LIMIT_REACHED: QpStatus.TIME_LIMIT_REACHED,
-    osqp.SolverStatus.OSQP_NON_CVX: QpStatus.NON_CONVEX,
-    osqp.SolverStatus.OSQP_SIGINT: QpStatus.INTERRUPTED,
-    osqp.SolverStatus.OSQP_UNSOLVED: QpStatus.UNSOLVED,
-}
+@functools.cache
+def _osqp_statuses() -> dict:
+    import osqp
+
+    st = osqp.SolverStatus
+    return {
+        st.OSQP_SOLVED: QpStatus.SOLVED,
+        st.OSQP_SOLVED_INACCURATE: QpStatus.SOLVED_INACCURATE,
+        st.OSQP_PRIMAL_INFEASIBLE: QpStatus.PRIMAL_INFEASIBLE,
+        st.OSQP_PRIMAL_INFEASIBLE_INACCURATE: QpStatus.PRIMAL_INFEASIBLE,
+        st.OSQP_DUAL_INFEASIBLE: QpStatus.DUAL_INFEASIBLE,
+        st.OSQP_DUAL_INFEASIBLE_INACCURATE: QpStatus.DUAL_INFEASIBLE,
+        st.OSQP_MAX_ITER_REACHED: QpStatus.MAX_ITER_REACHED,
+        st.OSQP_TIME_LIMIT_REACHED: QpStatus.TIME_LIMIT_REACHED,
+        st.OSQP_NON_CVX: QpStatus.NON_CONVEX,
+        st.OSQP_SIGINT: QpStatus.INTERRUPTED,
+        st.OSQP_UNSOLVED: QpStatus.UNSOLVED,
+    }
 
 
 def osqp_status(status_val: int) -> QpStatus:
     """:class:`QpStatus` of an OSQP ``info.status_val``, through ``osqp.SolverStatus``."""
+    import osqp
+
     try:
-        return _OSQP_STATUS[osqp.SolverStatus(status_val)]
+        return _osqp_statuses()[osqp.SolverStatus(status_val)]
     except ValueError:
         return QpStatus.UNSOLVED
 
@@ -189,9 +197,11 @@ def invalid_data(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, P: np.ndarray,
                                   f(hi, dtype=float), OSQP_INFTY)]
 
 
-def _csc_ones(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csc_matrix:
+def _csc_ones(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> Any:
     """A CSC matrix of ones on a pattern given in CSC storage order."""
     indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=shape[1]))])
+    import scipy.sparse as sp
+
     return sp.csc_matrix((np.ones(len(rows)), rows.astype(np.int64), indptr), shape=shape)
 
 
@@ -202,12 +212,16 @@ class OsqpSolver:
 
     def __init__(self, settings: QpSettings) -> None:
         self.settings = settings
-        self.instances: dict[tuple[int, int], osqp.OSQP] = {}
+        import osqp  # noqa: F401 - fail at construction, naming the missing package
+
+        self.instances: dict[tuple[int, int], Any] = {}
 
     def prepare(self, pattern: QpPattern) -> None:
         """Set up the OSQP instance of ``pattern`` (unit data on the full pattern)."""
         if pattern.key in self.instances:
             return
+        import osqp
+
         s = self.settings
         solver = osqp.OSQP()
         solver.setup(
