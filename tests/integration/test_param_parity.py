@@ -60,14 +60,17 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def _other(value):
-    """A valid value other than ``value`` for an override (same type)."""
+def _other(value, hi=None):
+    """A valid value other than ``value`` for an override (same type): +1 %, or −1 % where
+    +1 % would leave the field's range (``hi``: its upper end)."""
     if isinstance(value, bool):
         return value
     if isinstance(value, int):
         return value + 1
     if isinstance(value, float):
-        return value * 1.01 if value else 0.001
+        if not value:
+            return 0.001
+        return value * 0.99 if hi is not None and value * 1.01 > hi else value * 1.01
     return value
 
 
@@ -92,8 +95,13 @@ _KEEP = {"np_baseline", "nc_baseline", "np_min", "np_max", "nc_min", "nc_max", "
 
 
 def _overrides(cfg) -> dict:
-    return {f.name: _other(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)
-            if f.name not in _KEEP and _other(getattr(cfg, f.name)) != getattr(cfg, f.name)}
+    out = {}
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        o = _other(v, f.metadata.get("hi"))
+        if f.name not in _KEEP and o != v:
+            out[f.name] = o
+    return out
 
 
 def test_mpc_node_takes_every_parameter_as_the_in_process_loop(domain_id):

@@ -23,7 +23,10 @@ from fourws_common.vehicle_info import (
     node_vehicle_values,
     read_vehicle_file,
 )
+from fourws_mpc.core.config import MpcConfig
 from fourws_sim.core.vehicle_params import VehicleParams, load_vehicle_params
+from fourws_torque_alloc.core.allocation import AllocatorConfig
+from fourws_torque_alloc.core.pid import SpeedPidConfig
 
 PLANT = read_vehicle_file()
 PARAMS = load_vehicle_params()
@@ -178,3 +181,15 @@ def test_the_plant_and_the_controllers_accept_the_same_range_of_every_shared_key
     assert len(shared) >= 15
     for name in shared:
         assert {k: plant[name][k] for k in ("lo", "hi", "unit")} == field_range(name), name
+
+
+@pytest.mark.parametrize("config", [MpcConfig, AllocatorConfig, SpeedPidConfig])
+def test_the_controllers_take_the_cars_range_of_every_car_key(config):
+    """A controller's value of a car key (``track_width_m``: B = mean of B_f, B_r) accepts
+    the range the car file does, from the one owner (``vehicle_info.field_range``)."""
+    keys = {f.name for f in dataclasses.fields(VehicleInfo)}
+    shared = [f for f in dataclasses.fields(config) if f.name in keys | {"track_width_m"}]
+    assert len(shared) >= 2
+    for f in shared:
+        key = "track_width_front_m" if f.name == "track_width_m" else f.name
+        assert {k: f.metadata[k] for k in ("lo", "hi", "unit")} == field_range(key), f.name

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from fourws_common.params import from_mapping, param
+from fourws_common.vehicle_info import field_range
 from fourws_mpc.core.apcha import ApchaParams
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
@@ -109,8 +110,8 @@ class MpcConfig:
     apcha_nc_base: str = param("previous", "N_c^i of eq. (14): the previous N_c or ⌊N_p^t/3⌋",
                                choices=("previous", "np_third"))
     # constraints, eq. (20) and section 3.1.5
-    max_steer_front_deg: float = param(30.0, "|δf| bound", lo=0.0, hi=90.0, unit="deg")
-    max_steer_rear_deg: float = param(10.0, "|δr| bound", lo=0.0, hi=90.0, unit="deg")
+    max_steer_front_deg: float = param(30.0, "|δf| bound", **field_range("max_steer_front_deg"))
+    max_steer_rear_deg: float = param(10.0, "|δr| bound", **field_range("max_steer_rear_deg"))
     max_dsteer_front_deg: float = param(0.8, "|Δδf| per step", lo=1e-6, hi=90.0, unit="deg")
     max_dsteer_rear_deg: float = param(0.6, "|Δδr| per step", lo=1e-6, hi=90.0, unit="deg")
     max_yaw_moment_nm: float = param(1500.0, "|Mz| bound", lo=0.0, hi=1e6, unit="N*m")
@@ -135,14 +136,17 @@ class MpcConfig:
     prediction_model: str = param("single_track_relaxation", "prediction model behind the "
                                   "model seam (prediction_model.PREDICTION_MODELS)",
                                   choices=tuple(PREDICTION_MODELS))
-    mass_kg: float = param(750.0, "vehicle mass m", lo=1.0, hi=1e5, unit="kg")
-    yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", lo=1.0, hi=1e6, unit="kg*m^2")
-    cg_to_front_axle_m: float = param(1.10, "CG to front axle a", lo=0.01, hi=10.0, unit="m")
-    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b", lo=0.01, hi=10.0, unit="m")
+    mass_kg: float = param(750.0, "vehicle mass m", **field_range("mass_kg"))
+    yaw_inertia_kg_m2: float = param(750.0, "yaw inertia I_z", **field_range("yaw_inertia_kg_m2"))
+    cg_to_front_axle_m: float = param(1.10, "CG to front axle a",
+                                      **field_range("cg_to_front_axle_m"))
+    cg_to_rear_axle_m: float = param(1.25, "CG to rear axle b", **field_range("cg_to_rear_axle_m"))
     cornering_stiffness_front_static_n_per_rad: float = param(
-        27994.0, "per-tyre front cornering stiffness C_cf", lo=1.0, hi=1e7, unit="N/rad")
+        27994.0, "per-tyre front cornering stiffness C_cf",
+        **field_range("cornering_stiffness_front_static_n_per_rad"))
     cornering_stiffness_rear_static_n_per_rad: float = param(
-        29999.0, "per-tyre rear cornering stiffness C_cr", lo=1.0, hi=1e7, unit="N/rad")
+        29999.0, "per-tyre rear cornering stiffness C_cr",
+        **field_range("cornering_stiffness_rear_static_n_per_rad"))
     longitudinal_stiffness_front_n: float = param(50000.0, "per-tyre C_lf", lo=0.0, hi=1e7,
                                                   unit="N")
     longitudinal_stiffness_rear_n: float = param(50000.0, "per-tyre C_lr", lo=0.0, hi=1e7,
@@ -152,13 +156,13 @@ class MpcConfig:
     min_speed_mps: float = param(1.0, "vx floor in the slip angles", lo=0.01, hi=50.0,
                                  unit="m/s")
     # friction-aware prediction and grip envelope (docs/mpc.md, "Friction-aware prediction")
-    gravity_mps2: float = param(9.81, "gravity g", lo=1.0, hi=20.0, unit="m/s^2")
-    track_width_m: float = param(1.30, "track width B (front = rear)", lo=0.1, hi=5.0,
-                                 unit="m")
+    gravity_mps2: float = param(9.81, "gravity g", **field_range("gravity_mps2"))
+    track_width_m: float = param(1.30, "track width B (front = rear)",
+                                 **field_range("track_width_front_m"))
     tyre_shape_lateral: float = param(1.3, "Magic Formula shape factor C of the axle tyre",
-                                      lo=1.01, hi=1.99)
+                                      **field_range("tyre_shape_lateral"))
     tyre_curvature_lateral: float = param(-1.0, "Magic Formula curvature factor E of the "
-                                          "axle tyre", lo=-10.0, hi=0.99)
+                                          "axle tyre", **field_range("tyre_curvature_lateral"))
     mu_floor: float = param(0.1, "μ estimate is clamped to at least this (and flagged)",
                             lo=0.01, hi=1.0)
     mu_ceiling: float = param(1.2, "μ estimate is clamped to at most this (and flagged)",
@@ -185,11 +189,11 @@ class MpcConfig:
         "zoh", "discretisation of the linearised model: forward Euler (eq. 4) or the exact "
         "zero-order hold", choices=DISCRETISATIONS)
     steer_front_time_constant_s: float = param(
-        0.02, "front steering lag τ_f of the single_track_actuators model", lo=1e-4, hi=10.0,
-        unit="s")
+        0.02, "front steering lag τ_f of the single_track_actuators model",
+        **field_range("steer_front_time_constant_s"))
     steer_rear_time_constant_s: float = param(
-        0.02, "rear steering lag τ_r of the single_track_actuators model", lo=1e-4, hi=10.0,
-        unit="s")
+        0.02, "rear steering lag τ_r of the single_track_actuators model",
+        **field_range("steer_rear_time_constant_s"))
     relaxation_length_front_m: float = param(
         0.2199, "front tyres' lateral relaxation length σ_f at static load, of the "
         "single_track_relaxation model", lo=1e-3, hi=10.0, unit="m")

@@ -82,6 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourws_common.params import param
+from fourws_common.vehicle_info import field_range
 from fourws_common.wheels import Wheel
 from fourws_torque_alloc.core.bounded_qp import BoundedQp
 from fourws_torque_alloc.core.bounded_qp import clip_scalar as _clip
@@ -107,10 +108,12 @@ class AllocatorConfig:
     """Allocation method, geometry and limits (SI units)."""
 
     method: str = param("optimal", "allocation method", choices=METHODS)
-    track_width_m: float = param(1.30, "track width B, front = rear", lo=0.3, hi=5.0, unit="m")
-    wheel_radius_m: float = param(0.27, "effective rolling radius r", lo=0.05, hi=2.0, unit="m")
+    track_width_m: float = param(1.30, "track width B, front = rear",
+                                 **field_range("track_width_front_m"))
+    wheel_radius_m: float = param(0.27, "effective rolling radius r",
+                                  **field_range("wheel_radius_m"))
     motor_torque_max_nm: float = param(500.0, "torque limit of each in-wheel motor, both signs",
-                                       lo=1.0, hi=1.0e5, unit="N*m")
+                                       **field_range("motor_torque_max_nm"))
     priority: str = param("yaw_moment", "which demand optimal_bounded serves first when both "
                           "cannot be met", choices=PRIORITIES)
     min_fz_n: float = param(100.0, "a wheel with a vertical load at or below this is treated "
@@ -129,17 +132,17 @@ class AllocatorConfig:
     mu_nominal: float = param(0.8, "estimated: the road adhesion assumed for every wheel",
                               lo=0.01, hi=3.0)
     # the estimator's vehicle constants: the car file's names and values (unit test)
-    mass_kg: float = param(750.0, "estimated: vehicle mass", lo=1.0, hi=1.0e5, unit="kg")
-    cg_to_front_axle_m: float = param(1.10, "estimated: CG to front axle a", lo=0.05, hi=10.0,
-                                      unit="m")
-    cg_to_rear_axle_m: float = param(1.25, "estimated: CG to rear axle b", lo=0.05, hi=10.0,
-                                     unit="m")
-    cg_height_m: float = param(0.54, "estimated: CG height h", lo=0.0, hi=5.0, unit="m")
+    mass_kg: float = param(750.0, "estimated: vehicle mass", **field_range("mass_kg"))
+    cg_to_front_axle_m: float = param(1.10, "estimated: CG to front axle a",
+                                      **field_range("cg_to_front_axle_m"))
+    cg_to_rear_axle_m: float = param(1.25, "estimated: CG to rear axle b",
+                                     **field_range("cg_to_rear_axle_m"))
+    cg_height_m: float = param(0.54, "estimated: CG height h", **field_range("cg_height_m"))
     roll_stiffness_front_share: float = param(0.55, "estimated: front share of the roll "
                                               "stiffness (lateral load transfer split)",
-                                              lo=0.0, hi=1.0)
-    gravity_mps2: float = param(9.81, "estimated: gravitational acceleration", lo=1.0,
-                                hi=20.0, unit="m/s^2")
+                                              **field_range("roll_stiffness_front_share"))
+    gravity_mps2: float = param(9.81, "estimated: gravitational acceleration",
+                                **field_range("gravity_mps2"))
     # the wheel-slip limiter after the allocation (core.slip_control): a car's ABS and TCS
     slip_control: bool = param(True, "scale a wheel's torque down once its slip passes "
                                "slip_ratio_on in the torque's direction (ABS, traction control)")
@@ -148,8 +151,8 @@ class AllocatorConfig:
     slip_ratio_off: float = param(0.25, "slip ratio at which the limiter leaves no torque",
                                   lo=0.02, hi=2.0)
     slip_speed_min_mps: float = param(2.5, "below this speed the limiter is off (standstill), "
-                                      "and the slip's denominator floor (the car's)", lo=0.1,
-                                      hi=20.0, unit="m/s")
+                                      "and the slip's denominator floor (the car's)",
+                                      **field_range("slip_speed_min_mps"))
 
     def __post_init__(self) -> None:
         if self.slip_ratio_off <= self.slip_ratio_on:

@@ -44,6 +44,7 @@ import math
 from dataclasses import dataclass
 
 from fourws_common.params import param
+from fourws_common.vehicle_info import field_range
 
 ANTI_WINDUP_CHOICES = ("conditional", "back_calculation", "none")
 
@@ -70,9 +71,9 @@ class SpeedPidConfig:
     min_total_torque_nm: float = param(-2000.0, "lower limit of the total wheel torque "
                                        "(regenerative braking)", lo=-1.0e5, hi=0.0,
                                        unit="N*m")
-    wheel_radius_m: float = param(0.27, "effective rolling radius", lo=0.05, hi=2.0, unit="m")
+    wheel_radius_m: float = param(0.27, "effective rolling radius", **field_range("wheel_radius_m"))
     mass_kg: float = param(750.0, "vehicle mass, for the acceleration feed-forward",
-                           lo=1.0, hi=1.0e5, unit="kg")
+                           **field_range("mass_kg"))
     accel_feedforward: bool = param(True, "add m * a_ref to the PID force")
 
     def __post_init__(self) -> None:
