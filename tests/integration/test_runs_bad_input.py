@@ -93,11 +93,20 @@ def _on_a_small_disk(tmp_path, kib: int, command: str) -> subprocess.CompletedPr
 
 def test_a_full_disk_exits_1_naming_it_and_the_bag_recovers_up_to_the_failure(tmp_path):
     """Issue 41, item 6: ``--out`` on a full file system exited 2 (the bad-argument code)
-    with an AttributeError and left a 0-byte metrics.json."""
+    with an AttributeError and left a 0-byte metrics.json.
+
+    The disk is filled to the last byte once the bag holds two chunks (a filler waits on the
+    bag's size), so the recorder's next chunk and metrics.json both fail whatever the timing:
+    a disk left to fill by the bag alone kept a few kB free or not, depending on the last
+    chunk's size, and metrics.json then fitted on some runs."""
     from fourws_bringup.bag.run_data import read_run
 
-    _on_a_small_disk(tmp_path, 700, "fourws run --scenario dlc_60_mu05 --controller improved "
-                     "--out $DISK/run --no-plots --compose all")
+    filler = ("(while [ $(stat -c %s $DISK/run/bag/bag_0.mcap 2>/dev/null || echo 0) -lt "
+              "150000 ]; do sleep 0.02; done; dd if=/dev/zero of=$DISK/fill bs=4k "
+              "2>/dev/null; true) & F=$!; ")
+    _on_a_small_disk(tmp_path, 4096, filler + "fourws run --scenario dlc_60_mu05 --controller "
+                     "improved --out $DISK/run --no-plots --compose all; r=$?; "
+                     "kill $F 2>/dev/null; (exit $r)")
     rc = int((tmp_path / "rc").read_text())
     err = (tmp_path / "stderr").read_text()
     assert rc == 1, err[-3000:]
