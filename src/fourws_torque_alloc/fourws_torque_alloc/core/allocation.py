@@ -71,7 +71,8 @@ above 1e6 N, |T| above demand_sanity_factor × 4 T_motor,max or |M_z| above
 demand_sanity_factor × 2 B T_motor,max / r raise ``ValueError``. Outputs are always finite.
 Status strings: "ok", or a comma-separated subset, in this order, of "limited" (some demand
 unmet beyond 1e-9 relative), "wheel_lift" (some wheel's load at or below min_fz_n, reported
-by every method) and "solver_fallback" (see above).
+by every method) and "solver_fallback" (see above); :class:`TorqueAllocator` appends
+"slip_limited" when its slip limiter cut a wheel's torque.
 """
 
 from __future__ import annotations
