@@ -57,11 +57,13 @@ class QpStatus(enum.Enum):
 
 
 @functools.cache
-def _osqp_statuses() -> dict:
+def _osqp_statuses() -> dict[int, QpStatus]:
+    """OSQP's ``info.status_val`` -> :class:`QpStatus`, through ``osqp.SolverStatus``
+    (built at the first OSQP solve, so a DAQP controller never imports osqp)."""
     import osqp
 
     st = osqp.SolverStatus
-    return {
+    table = {
         st.OSQP_SOLVED: QpStatus.SOLVED,
         st.OSQP_SOLVED_INACCURATE: QpStatus.SOLVED_INACCURATE,
         st.OSQP_PRIMAL_INFEASIBLE: QpStatus.PRIMAL_INFEASIBLE,
@@ -74,16 +76,12 @@ def _osqp_statuses() -> dict:
         st.OSQP_SIGINT: QpStatus.INTERRUPTED,
         st.OSQP_UNSOLVED: QpStatus.UNSOLVED,
     }
+    return {int(k.value): v for k, v in table.items()}
 
 
 def osqp_status(status_val: int) -> QpStatus:
-    """:class:`QpStatus` of an OSQP ``info.status_val``, through ``osqp.SolverStatus``."""
-    import osqp
-
-    try:
-        return _osqp_statuses()[osqp.SolverStatus(status_val)]
-    except ValueError:
-        return QpStatus.UNSOLVED
+    """:class:`QpStatus` of an OSQP ``info.status_val`` (an unknown value: UNSOLVED)."""
+    return _osqp_statuses().get(int(status_val), QpStatus.UNSOLVED)
 
 
 @dataclass(frozen=True)
