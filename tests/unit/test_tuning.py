@@ -36,6 +36,84 @@ def test_candidates_start_from_the_package_defaults_on_one_grid_for_every_group(
         assert base in tuning.candidates(spec, g)             # exponent 0 is the default
 
 
+def _fake_search(monkeypatch, table, radius=None):
+    """tune() on a 3 x 3 grid whose runs return ``table[grid index][run]`` (inf: an abort)
+    and whose candidates have ρ ``radius[grid index]`` (default 0.5)."""
+    import dataclasses
+    import math
+
+    from fourws_bringup import sweep
+
+    spec = dataclasses.replace(tuning.load_tuning_spec(SPEC), grid_exponents=(0, 1, 2),
+                               groups=(tuning.Group("g", ("c",), ("p", "q")),))
+    monkeypatch.setattr(tuning, "candidates",
+                        lambda _s, _g: [{"p": float(i), "q": 0.0} for i in range(9)])
+    monkeypatch.setattr(tuning, "_radius_job",
+                        lambda a: (radius or [0.5] * 9)[int(a[2]["p"])])
+    monkeypatch.setattr(tuning, "shipped", lambda _g: {"p": 4.0, "q": 0.0})
+    monkeypatch.setattr(tuning, "_jobs", lambda _s, _g, c: [(int(c["p"]), r)
+                                                            for r in range(len(table[0]))])
+    ran = []
+
+    def run_job(job):
+        ran.append(job)
+        v = table[job[0]][job[1]]
+        return {"controller": "c", "completed": math.isfinite(v),
+                "max_abs_lateral_error_m": v}
+
+    monkeypatch.setattr(sweep, "run_job", run_job)
+    return spec, ran
+
+
+def _brute_force(table, radius=None):
+    """The grid index step 4 chooses, from every run of every candidate."""
+    import math
+
+    radius = radius or [0.5] * 9
+    kept = [g for g in range(9) if radius[g] <= 0.98]
+    score = {g: max(table[g]) for g in kept}
+    ok = [g for g in kept if math.isfinite(score[g])
+          and all(math.isfinite(score[h]) for h in tuning.neighbours(g, 3) if h in score)]
+    return min(ok, key=lambda g: (score[g], radius[g], g))
+
+
+def test_the_choice_sits_next_to_no_abort_and_equals_a_full_evaluation(monkeypatch):
+    """Step 4: the best candidate (4) sits next to one (5) that aborts only in a run pruning
+    skipped; the choice moves to the best whose kept neighbours complete, which is what
+    a full evaluation of every run chooses, and the report marks the one set aside."""
+    inf = float("inf")
+    table = [[0.05, 0.05], [0.06, 0.06], [0.07, 0.07],
+             [0.06, 0.06], [0.01, 0.01], [0.5, inf],
+             [0.08, 0.08], [0.09, 0.09], [0.02, 0.02]]
+    spec, ran = _fake_search(monkeypatch, table)
+    chosen, report = tuning.tune(spec, progress=False)
+    assert chosen["g"] == {"p": 0.0, "q": 0.0} and _brute_force(table) == 0
+    assert (5, 1) in ran                                   # the pruned neighbour finished
+    assert [r["p"] for r in report if r["beside_abort"]] == [4.0, 8.0]
+    assert len(ran) < 2 * 9                                # pruning still saves runs
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_pruned_search_chooses_what_a_full_evaluation_chooses(monkeypatch, seed):
+    """Random tables with aborts and margin-rejected candidates: exact pruning plus step 4
+    choose the brute-force choice, or both find no candidate."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    table = rng.uniform(0.01, 0.1, (9, 3))
+    table[rng.random((9, 3)) < 0.1] = np.inf
+    radius = list(np.where(rng.random(9) < 0.15, 0.99, 0.5))
+    spec, _ = _fake_search(monkeypatch, table.tolist(), radius)
+    try:
+        want = _brute_force(table.tolist(), radius)
+    except ValueError:                                     # min() of nothing
+        with pytest.raises(ValueError, match="aborts"):
+            tuning.tune(spec, progress=False)
+        return
+    chosen, _ = tuning.tune(spec, progress=False)
+    assert chosen["g"]["p"] == float(want)
+
+
 def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
     bad = tmp_path / "t.yaml"
     bad.write_text(SPEC.read_text(encoding="utf-8").replace("seeds:", "seedz:"),

@@ -17,10 +17,12 @@ the same for every group of controllers (the spec's ``groups``):
    aborts; the candidate's is the worst over the group's controllers. Exact pruning
    (:func:`tune`): a candidate already worse than the best complete one is abandoned; the
    choice is a full evaluation's.
-4. **Choice.** The lowest score; ties go to the lower worst ρ, then to the grid order. The
-   chosen values are written into each preset of the group between the markers :data:`BEGIN`
-   and :data:`END` of its ``mpc_node`` section; ``--check`` writes nothing and fails if the
-   shipped presets differ from what the procedure chooses.
+4. **Choice.** The lowest score among the candidates whose kept grid neighbours (one step
+   in i or j, :func:`neighbours`) complete every run: the choice sits on a plateau, not on
+   the edge of a cliff that one noise draw did not show. Ties go to the lower worst ρ, then to
+   the grid order. The chosen values are written into each preset of the group between the
+   markers :data:`BEGIN` and :data:`END` of its ``mpc_node`` section; ``--check`` writes
+   nothing and fails if the shipped presets differ from what the procedure chooses.
 
 Everything is deterministic (seeded noise, a fixed job order), so a rerun reproduces the
 shipped YAML; the report (``--report``) lists every candidate's ρ and score.
@@ -202,6 +204,14 @@ def _score(row: Mapping[str, Any]) -> float:
     return float(row["max_abs_lateral_error_m"]) if row.get("completed") else math.inf
 
 
+def neighbours(index: int, n: int) -> list[int]:
+    """The grid indices next to ``index`` (one step in i or in j) on an ``n`` × ``n`` grid in
+    grid order (:func:`candidates`)."""
+    i, j = divmod(index, n)
+    return [a * n + b for a, b in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
+            if 0 <= a < n and 0 <= b < n]
+
+
 def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
     """(chosen values per group, one report row per kept candidate): steps 1-4.
@@ -213,11 +223,11 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
     once, in grid order, so a losing candidate costs one run, not a batch. A good first bar
     prunes the rest sooner, and since pruning is strict and the
     choice compares (score, ρ, grid index), the order changes the time, never the choice,
-    which is the one a full evaluation makes. The report, in grid order, gives a pruned
-    candidate's lower bound."""
+    which is the one a full evaluation makes. Step 4 finishes the runs it needs: those of the
+    best candidate's kept grid neighbours, and of any pruned candidate whose lower bound could
+    beat the next best once the best is set aside. The report, in grid order, gives a pruned
+    candidate's lower bound and says which candidates sit next to an abort."""
     from concurrent.futures import Executor, ProcessPoolExecutor
-
-    from .sweep import run_job
 
     class _Serial(Executor):
         def map(self, fn, *its, **_kw):  # type: ignore[override]
@@ -225,64 +235,115 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
 
     chosen: dict[str, dict[str, float]] = {}
     report: list[dict[str, Any]] = []
-    batch = max(workers, 1)
     with (ProcessPoolExecutor(max_workers=workers) if workers > 1 else _Serial()) as pool:
         for group in spec.groups:
-            cands = candidates(spec, group)
-            radii = list(pool.map(_radius_job, [(spec, group, c) for c in cands]))
-            kept = [(c, r) for c, r in zip(cands, radii, strict=True)
-                    if r <= spec.max_spectral_radius]
-            if progress:
-                print(f"[tune] {group.name}: {len(kept)} of {len(cands)} candidates have "
-                      f"rho <= {spec.max_spectral_radius}", file=sys.stderr)
-            if not kept:
-                raise ValueError(f"group {group.name}: no candidate of the grid has a "
-                                 f"spectral radius <= {spec.max_spectral_radius}; widen "
-                                 "grid_exponents")
-            best: tuple[float, float, int] | None = None
-            now = shipped(group)
-            order = sorted(range(len(kept)), key=lambda k: kept[k][0] != now)
-            rows: dict[int, dict[str, Any]] = {}
-            jobs = {k: _jobs(spec, group, kept[k][0]) for k in order}
-            done = dict.fromkeys(order, 0)
-            by_ctrl: dict[int, dict[str, float]] = {k: {} for k in order}
-            pending = list(order)
-            while pending:
-                # the first candidate (the presets' own, when on the grid) runs alone, a batch
-                # of its runs at a time, to set the bar; then the next run of each of `batch`
-                # candidates at once, so that a losing candidate is dropped after one run
-                if best is None:
-                    k0 = pending[0]
-                    work = [(k0, j) for j in jobs[k0][done[k0]:done[k0] + batch]]
-                else:
-                    work = [(k, jobs[k][done[k]]) for k in pending[:batch]]
-                for (k, _), row in zip(work, pool.map(run_job, [j for _, j in work]),
-                                       strict=True):
-                    by_ctrl[k][row["controller"]] = max(by_ctrl[k].get(row["controller"], 0.0),
-                                                        _score(row))
-                    done[k] += 1
-                for k in dict.fromkeys(k for k, _ in work):
-                    score = max(by_ctrl[k].values())
-                    complete = done[k] == len(jobs[k])
-                    if not complete and (best is None or score <= best[0]):
-                        continue                  # exact pruning: a maximum only grows
-                    c, r = kept[k]
-                    pending.remove(k)
-                    rows[k] = {"group": group.name, **c, "worst_rho": round(r, 5),
-                               "runs": done[k], "score_m": score if complete else None,
-                               "pruned_above_m": None if complete else score,
-                               **{f"max_ey_{preset_label(n)}": v
-                                  for n, v in by_ctrl[k].items()}}
-                    if progress:
-                        print(f"[tune] {group.name} {dict(c)}: rho {r:.4f}, "
-                              + (f"score {score:.4f} m" if complete else
-                                 f"pruned after {done[k]} runs (> {best[0]:.4f} m)"),
-                              file=sys.stderr)
-                    if complete and (best is None or (score, r, k) < best):
-                        best = (score, r, k)
-            report += [rows[k] for k in sorted(rows)]
-            chosen[group.name] = kept[best[2]][0]
+            chosen[group.name], rows = _tune_group(spec, group, pool, max(workers, 1),
+                                                   progress)
+            report += rows
     return chosen, report
+
+
+def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress: bool
+                ) -> tuple[dict[str, float], list[dict[str, Any]]]:
+    """One group's steps 1-4 (:func:`tune`): its chosen values and report rows."""
+    from .sweep import run_job
+
+    n = len(spec.grid_exponents)
+    report: list[dict[str, Any]] = []
+    cands = candidates(spec, group)
+    radii = list(pool.map(_radius_job, [(spec, group, c) for c in cands]))
+    kept = [(g, c, r) for g, (c, r) in enumerate(zip(cands, radii, strict=True))
+            if r <= spec.max_spectral_radius]
+    if progress:
+        print(f"[tune] {group.name}: {len(kept)} of {len(cands)} candidates have "
+              f"rho <= {spec.max_spectral_radius}", file=sys.stderr)
+    if not kept:
+        raise ValueError(f"group {group.name}: no candidate of the grid has a "
+                         f"spectral radius <= {spec.max_spectral_radius}; widen "
+                         "grid_exponents")
+    best: tuple[float, float, int] | None = None
+    now = shipped(group)
+    order = sorted(range(len(kept)), key=lambda k: kept[k][1] != now)
+    jobs = {k: _jobs(spec, group, kept[k][1]) for k in order}
+    done = dict.fromkeys(order, 0)
+    by_ctrl: dict[int, dict[str, float]] = {k: {} for k in order}
+
+    def score(k: int) -> float:
+        return max(by_ctrl[k].values()) if by_ctrl[k] else 0.0
+
+    def complete(k: int) -> bool:
+        return done[k] == len(jobs[k])
+
+    def run(work: list[tuple[int, Any]]) -> None:
+        for (k, _), row in zip(work, pool.map(run_job, [j for _, j in work]),
+                               strict=True):
+            by_ctrl[k][row["controller"]] = max(by_ctrl[k].get(row["controller"], 0.0),
+                                                _score(row))
+            done[k] += 1
+
+    def say(k: int) -> None:
+        if progress:
+            print(f"[tune] {group.name} {dict(kept[k][1])}: rho {kept[k][2]:.4f}, "
+                  + (f"score {score(k):.4f} m" if complete(k) else
+                     f"pruned after {done[k]} runs (> {best[0]:.4f} m)"),
+                  file=sys.stderr)
+
+    pending = list(order)
+    while pending:
+        # the first candidate (the presets' own, when on the grid) runs alone, a batch
+        # of its runs at a time, to set the bar; then the next run of each of `batch`
+        # candidates at once, so that a losing candidate is dropped after one run
+        if best is None:
+            k0 = pending[0]
+            work = [(k0, j) for j in jobs[k0][done[k0]:done[k0] + batch]]
+        else:
+            work = [(k, jobs[k][done[k]]) for k in pending[:batch]]
+        run(work)
+        for k in dict.fromkeys(k for k, _ in work):
+            if not complete(k) and (best is None or score(k) <= best[0]):
+                continue                  # exact pruning: a maximum only grows
+            pending.remove(k)
+            say(k)
+            if complete(k) and (best is None or (score(k), kept[k][2], k) < best):
+                best = (score(k), kept[k][2], k)
+
+    # step 4: the best candidate whose kept grid neighbours all complete
+    at = {g: k for k, (g, _, _) in enumerate(kept)}
+    beside_abort: set[int] = set()
+    while True:
+        full = [(score(k), kept[k][2], k) for k in order
+                if complete(k) and k not in beside_abort and math.isfinite(score(k))]
+        if not full:
+            raise ValueError(f"group {group.name}: every candidate aborts or sits next "
+                             "to one that aborts; widen grid_exponents")
+        b = min(full)
+        todo = [k for k in order if not complete(k) and k not in beside_abort
+                and score(k) <= b[0]]     # could beat b once finished
+        todo += [at[g] for g in neighbours(kept[b[2]][0], n)
+                 if g in at and not complete(at[g]) and at[g] not in todo
+                 and math.isfinite(score(at[g]))]    # an abort is known already
+        if todo:
+            run([(k, j) for k in todo for j in jobs[k][done[k]:]])
+            for k in todo:
+                say(k)
+            continue
+        if all(math.isfinite(score(at[g])) for g in neighbours(kept[b[2]][0], n)
+               if g in at):
+            best = b
+            break
+        beside_abort.add(b[2])
+        if progress:
+            print(f"[tune] {group.name} {dict(kept[b[2]][1])}: set aside, a grid "
+                  "neighbour aborts", file=sys.stderr)
+    for k in sorted(order):
+        c, r = kept[k][1], kept[k][2]
+        report.append({"group": group.name, **c, "worst_rho": round(r, 5),
+                       "runs": done[k], "score_m": score(k) if complete(k) else None,
+                       "pruned_above_m": None if complete(k) else score(k),
+                       "beside_abort": "yes" if k in beside_abort else None,
+                       **{f"max_ey_{preset_label(m)}": v
+                          for m, v in by_ctrl[k].items()}})
+    return kept[best[2]][1], report
 
 
 def preset_block(values: Mapping[str, float]) -> list[str]:
