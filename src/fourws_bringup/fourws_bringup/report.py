@@ -168,7 +168,8 @@ def _take(values: np.ndarray | None, idx: np.ndarray | None) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # Panels
 # ---------------------------------------------------------------------------------------------
-def _plt():
+def load_pyplot():
+    """matplotlib.pyplot on the Agg back end (no display), imported on first use."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,7 +218,7 @@ PANELS = (
 
 def _save(fig, path: Path) -> Path:
     fig.savefig(path, dpi=110)
-    _plt().close(fig)
+    load_pyplot().close(fig)
     return path
 
 
@@ -228,7 +229,7 @@ def _legend(ax, n_runs: int) -> None:
 
 
 def _draw_overview(runs: Sequence[tuple[str, Series]], path: Path, title: str) -> Path:
-    plt = _plt()
+    plt = load_pyplot()
     fig, axes = plt.subplots(2, 3, figsize=(15, 8))
     for ax, (_name, draw) in zip(axes.flat, PANELS, strict=True):
         draw(ax, runs)
@@ -239,7 +240,7 @@ def _draw_overview(runs: Sequence[tuple[str, Series]], path: Path, title: str) -
 
 
 def _draw_panel(runs: Sequence[tuple[str, Series]], path: Path, title: str, draw) -> Path:
-    fig, ax = _plt().subplots(figsize=(7, 4))
+    fig, ax = load_pyplot().subplots(figsize=(7, 4))
     draw(ax, runs)
     _legend(ax, len(runs))
     fig.suptitle(title, fontsize=9)
@@ -289,7 +290,7 @@ def _split(jobs: Sequence[_Figure]) -> tuple[list[_Figure], list[_Figure]]:
 
 def _draw(runs: Sequence[tuple[str, Series]], out_dir: Path, prefix: str, title: str,
           maxima: Mapping[str, float], workers: int = 1) -> list[Path]:
-    _plt()  # before a fork: the child starts with matplotlib loaded
+    load_pyplot()  # before a fork: the child starts with matplotlib loaded
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = _figure_jobs(runs, out_dir, prefix, title, maxima)
     mine, theirs = _split(jobs) if workers > 1 and len(jobs) > 1 else (jobs, [])
@@ -338,7 +339,7 @@ def _wait_figures(pid: int) -> bool:
 
 def _draw_adaptive(runs: Sequence[tuple[str, Series]], path: Path, title: str,
                    maxima: Mapping[str, float]) -> Path:
-    plt = _plt()
+    plt = load_pyplot()
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
     single = len(runs) == 1
     for label, s in runs:
@@ -365,7 +366,7 @@ def _draw_adaptive(runs: Sequence[tuple[str, Series]], path: Path, title: str,
 
 
 def _draw_torques(runs: Sequence[tuple[str, Series]], path: Path, title: str) -> Path:
-    plt = _plt()
+    plt = load_pyplot()
     fig, axes = plt.subplots(len(runs), 1, figsize=(9, 3.2 * len(runs) + 0.6), sharex=True,
                              squeeze=False)
     for ax, (label, s) in zip(axes[:, 0], runs, strict=True):

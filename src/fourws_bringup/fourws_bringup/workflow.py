@@ -128,9 +128,9 @@ def _prefetch_scoring(plots: bool) -> None:
         x = np.linspace(0.0, 9.0, 10)
         Reference.from_arrays(x, 0.0 * x, 0.0 * x, 0.0 * x, 1.0 + 0.0 * x).errors(1.0, 0.1, 0.0)
         if plots:
-            from .report import _plt
+            from .report import load_pyplot
 
-            _plt()
+            load_pyplot()
     except Exception:  # noqa: BLE001, S110 - only a head start; scoring imports for itself
         pass
 
