@@ -213,8 +213,7 @@ def main() -> int:
         "error; the unmet F_x and M_z (demanded against what the wheel torques deliver); the "
         "braking distance. Rules:",
         "",
-        *[("* " + " ".join(b.split())) for b in (L.__doc__ or "").split(
-            "Rules, stated once and printed in the report:")[1].split("\n* ") if b.strip()],
+        *[f"* {rule}" for rule in L.RULES],
         "",
         "## Headline: highest rung or speed passed clean",
         "As shipped (" + ", ".join(f"{c}: {m}" for c, m in shipped.items()) + " tyres; lqr_ff "

@@ -1,15 +1,7 @@
 """The limit bench's report (docs/limits.md) from its sweep rows: pure tables, no plots.
 
-Rules, stated once and printed in the report (docs/limits.md, "Metrics and rules"):
-
-* a **case** is one scenario under one condition for one controller; it is **clean** when
-  every seed's run completed without a spin and without a cone or lane violation
-  (``core.limit_metrics``); a realistic case has five seeds, an ideal one one;
-* a controller's **headline** on a ladder is the highest rung whose case is clean, with
-  every rung below it clean too (a rung passed above a failed one is shown, not counted);
-* **DYC's effect**: paired seeds (same scenario, condition and seed), improved against
-  ampc_4ws (the same MPC without DYC), on rungs of at least 0.9 μg: the median and range of
-  the relative change of max |β| over the pairs.
+Its rules are :data:`RULES`, stated once and printed in the report (docs/limits.md,
+"Metrics and rules").
 """
 
 from __future__ import annotations
@@ -22,6 +14,17 @@ from typing import Any
 
 import numpy as np
 
+#: the report's rules, one sentence each (printed in docs/limits.md, "Metrics and rules")
+RULES = (
+    "a **case** is one scenario under one condition for one controller; it is **clean** when "
+    "every seed's run completed without a spin and without a cone or lane violation "
+    "(``core.limit_metrics``); a realistic case has five seeds, an ideal one one;",
+    "a controller's **headline** on a ladder is the highest rung whose case is clean, with "
+    "every rung below it clean too (a rung passed above a failed one is shown, not counted);",
+    "**DYC's effect**: paired seeds (same scenario, condition and seed), improved against "
+    "ampc_4ws (the same MPC without DYC), on rungs of at least 0.9 μg: the median and range of "
+    "the relative change of max |β| over the pairs.",
+)
 CONTROLLERS = ("mpc_fws", "mpc_4ws", "ampc_4ws", "ampc_4ws_dyc", "improved", "lqr_ff")
 #: DYC presets and their twin without DYC
 TWINS = {"improved": "ampc_4ws", "ampc_4ws_dyc": "ampc_4ws"}
