@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from fourws_bringup.bag.run_data import read_run
-from fourws_bringup.paper import PAPER_RUNS, WORLDS, run_dir_name
+from fourws_bringup.paper import CONDITIONS, PAPER_RUNS, run_dir_name
 from fourws_bringup.scoring import bag_metrics
 
 KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m",
@@ -27,7 +27,7 @@ KEYS = ("max_abs_lateral_error_m", "rmse_lateral_error_m", "mae_lateral_error_m"
 def main(src: str) -> int:
     root = Path(__file__).resolve().parents[1] / "bags"
     rows = []
-    for ctrl, scen, world in [(c, s, w) for w in WORLDS for c, s in PAPER_RUNS]:
+    for ctrl, scen, world in [(c, s, w) for w in CONDITIONS for c, s in PAPER_RUNS]:
         name = run_dir_name(ctrl, scen, world)
         dst = root / name
         if dst.exists():
