@@ -43,8 +43,9 @@ def main(argv: list[str]) -> int:
         prof.disable()
     whole, spent = min(runs, key=lambda r: r[0])
     n = log.steps
+    sim_s = float(log.state["t_s"][-1] - log.state["t_s"][0]) * n / max(n - 1, 1)
     print(f"{controller} on {scenario}: {n} steps, {whole / n * 1e3:.3f} ms per step "
-          f"(real-time factor {0.01 * n / whole:.1f}; stage timers included)")
+          f"(real-time factor {sim_s / whole:.1f}; stage timers included)")
     for label, s in sorted(spent.items(), key=lambda kv: -kv[1]):
         print(f"  {label:12s} {s / n * 1e3:.3f} ms ({100 * s / whole:.0f} %)")
     rest = whole - sum(spent.values())

@@ -29,6 +29,7 @@ import numpy as np
 
 from fourws_bringup.paper import T67_KEYS, TABLES, paper_condition, rank, tie_groups
 
+ROOT = Path(__file__).resolve().parents[1]
 #: condition of ``fourws paper`` -> the sweep condition that runs it in the bench
 SWEEP_CONDITION = {"ideal": "ideal", "realistic": "all"}
 BENCH = {"dlc_60_mu05": "bench_dlc_60_mu05", "dlc_90_mu06": "bench_dlc_90_mu06"}
@@ -130,9 +131,6 @@ def tables(rows: list[dict[str, str]], margins: bool = True) -> str:
                     + " < ".join(" ≈ ".join(g) for g in groups)
                     + f"; paper {' < '.join(paper_order)}", ""]
     return "\n".join(out)
-
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def page(csv_path: str) -> str:

@@ -89,8 +89,24 @@ def test_the_choice_sits_next_to_no_abort_and_equals_a_full_evaluation(monkeypat
     chosen, report = tuning.tune(spec, progress=False)
     assert chosen["g"] == {"p": 0.0, "q": 0.0} and _brute_force(table) == 0
     assert (5, 1) in ran                                   # the pruned neighbour finished
-    assert [r["p"] for r in report if r["beside_abort"]] == [4.0, 8.0]
+    assert [r["p"] for r in report if r["set_aside"]] == [4.0, 8.0]
     assert len(ran) < 2 * 9                                # pruning still saves runs
+
+
+def test_when_every_finished_candidate_is_set_aside_the_pruned_ones_are_finished(monkeypatch):
+    """The best (4) sits next to two aborts (5, 7) that pruning had not run to the end, and
+    every other candidate was pruned after one run: step 4 finishes them rather than give
+    up, and takes the one whose kept neighbours complete (0: its neighbours 1 and 3 fail
+    the margin and do not count)."""
+    inf = float("inf")
+    table = [[0.05, 0.05], [0.06, 0.06], [0.02, 0.02],
+             [0.06, 0.06], [0.01, 0.01], [0.5, inf],
+             [0.03, 0.03], [0.6, inf], [0.04, 0.04]]
+    radius = [0.5, 0.99, 0.5, 0.99, 0.5, 0.5, 0.5, 0.5, 0.5]
+    spec, _ = _fake_search(monkeypatch, table, radius)
+    chosen, report = tuning.tune(spec, progress=False)
+    assert chosen["g"]["p"] == 0.0 == float(_brute_force(table, radius))
+    assert [r["p"] for r in report if r["set_aside"]] == [2.0, 4.0, 6.0, 8.0]
 
 
 @pytest.mark.parametrize("seed", range(20))

@@ -226,7 +226,8 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
     which is the one a full evaluation makes. Step 4 finishes the runs it needs: those of the
     best candidate's kept grid neighbours, and of any pruned candidate whose lower bound could
     beat the next best once the best is set aside. The report, in grid order, gives a pruned
-    candidate's lower bound and says which candidates sit next to an abort."""
+    candidate's lower bound and marks the candidates step 4 set aside for an aborting
+    neighbour."""
     from concurrent.futures import Executor, ProcessPoolExecutor
 
     class _Serial(Executor):
@@ -309,29 +310,31 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
 
     # step 4: the best candidate whose kept grid neighbours all complete
     at = {g: k for k, (g, _, _) in enumerate(kept)}
-    beside_abort: set[int] = set()
+    set_aside: set[int] = set()
     while True:
         full = [(score(k), kept[k][2], k) for k in order
-                if complete(k) and k not in beside_abort and math.isfinite(score(k))]
-        if not full:
-            raise ValueError(f"group {group.name}: every candidate aborts or sits next "
-                             "to one that aborts; widen grid_exponents")
-        b = min(full)
-        todo = [k for k in order if not complete(k) and k not in beside_abort
-                and score(k) <= b[0]]     # could beat b once finished
-        todo += [at[g] for g in neighbours(kept[b[2]][0], n)
-                 if g in at and not complete(at[g]) and at[g] not in todo
-                 and math.isfinite(score(at[g]))]    # an abort is known already
+                if complete(k) and k not in set_aside and math.isfinite(score(k))]
+        bar = min(full)[0] if full else math.inf
+        todo = [k for k in order if not complete(k) and score(k) <= bar
+                and math.isfinite(score(k))]     # could beat the best once finished
+        if full:
+            todo += [at[g] for g in neighbours(kept[min(full)[2]][0], n)
+                     if g in at and not complete(at[g]) and at[g] not in todo
+                     and math.isfinite(score(at[g]))]    # an abort is known already
         if todo:
             run([(k, j) for k in todo for j in jobs[k][done[k]:]])
             for k in todo:
                 say(k)
             continue
+        if not full:
+            raise ValueError(f"group {group.name}: every candidate aborts or sits next "
+                             "to one that aborts; widen grid_exponents")
+        b = min(full)
         if all(math.isfinite(score(at[g])) for g in neighbours(kept[b[2]][0], n)
                if g in at):
             best = b
             break
-        beside_abort.add(b[2])
+        set_aside.add(b[2])
         if progress:
             print(f"[tune] {group.name} {dict(kept[b[2]][1])}: set aside, a grid "
                   "neighbour aborts", file=sys.stderr)
@@ -340,7 +343,7 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
         report.append({"group": group.name, **c, "worst_rho": round(r, 5),
                        "runs": done[k], "score_m": score(k) if complete(k) else None,
                        "pruned_above_m": None if complete(k) else score(k),
-                       "beside_abort": "yes" if k in beside_abort else None,
+                       "set_aside": "yes" if k in set_aside else None,
                        **{f"max_ey_{preset_label(m)}": v
                           for m, v in by_ctrl[k].items()}})
     return kept[best[2]][1], report
