@@ -156,3 +156,20 @@ def test_the_shipped_view_takes_each_preset_under_its_own_model():
     by = L.with_shipped(L.cases(rows), {"improved": "friction", "mpc_4ws": "linear"})
     for c in ("improved", "mpc_4ws", "lqr_ff"):
         assert L.clean(by[(c, "ladder_dlc_60_mu05_110", "realistic_shipped")]), c
+
+
+def test_a_runs_nearest_points_are_computed_once_and_give_the_same_metrics():
+    """A closed-loop log's ``nearest`` is ``metrics.path_nearest`` of its true poses, and the
+    metrics and limit metrics that take it equal those that compute it again."""
+    from fourws_bringup.core.closed_loop import run_closed_loop
+    from fourws_bringup.core.metrics import path_nearest, run_metrics
+
+    log = run_closed_loop("dlc_60_mu05", "improved", max_steps=300)
+    s = log.state
+    again = path_nearest(log.reference, s["x"], s["y"], s["yaw"])
+    assert all(np.array_equal(a, b) for a, b in zip(log.nearest, again, strict=True))
+    assert log.nearest is log.nearest                       # cached
+    plain = run_metrics(log.reference, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"], s["vy"],
+                        s["sideslip"], log.solve_ms)
+    assert {k: log.metrics()[k] for k in plain} == plain
+    assert limit_metrics(log, B, R, nearest=log.nearest) == limit_metrics(log, B, R)

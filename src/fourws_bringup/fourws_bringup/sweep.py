@@ -140,7 +140,7 @@ def run_job(job: Job) -> dict[str, Any]:
         row.update(m)
         row["steps"] = log.steps
         row.update(activity(log))
-        row.update(limit_metrics(log, *_allocator_geometry(job)))
+        row.update(limit_metrics(log, *_allocator_geometry(job), nearest=log.nearest))
         for key in ("np", "nc"):
             v = log.mpc[key]
             row[f"{key}_min"], row[f"{key}_max"] = (int(v.min()), int(v.max())) if len(v) else \

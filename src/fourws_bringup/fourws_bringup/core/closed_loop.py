@@ -24,6 +24,7 @@ of each ``mpc.step`` call in ``solve_ms`` (NaN otherwise). :func:`run_closed_loo
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,7 +39,7 @@ from fourws_bringup.core.configs import (
     load_pid_config,
     plant_values,
 )
-from fourws_bringup.core.metrics import run_metrics
+from fourws_bringup.core.metrics import path_nearest, run_metrics
 from fourws_common.input_guard import state_mu
 from fourws_common.path_lookup import SpeedProfile
 from fourws_mpc.core.controller import VehicleSample
@@ -87,12 +88,19 @@ class ClosedLoopLog:
         """Number of control steps taken."""
         return len(self.drive_force_n)
 
+    @functools.cached_property
+    def nearest(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(e_Y, e_φ, nearest index) of the true poses (``metrics.path_nearest``), computed
+        once for :meth:`metrics` and the limit metrics."""
+        s = self.state
+        return path_nearest(self.reference, s["x"], s["y"], s["yaw"])
+
     def metrics(self) -> dict[str, Any]:
         """metrics.json values of this run (errors recomputed from the poses)."""
         s = self.state
         m: dict[str, Any] = {"scenario": self.scenario, "controller": self.controller}
         m.update(run_metrics(self.reference, s["t_s"], s["x"], s["y"], s["yaw"], s["vx"],
-                             s["vy"], s["sideslip"], self.solve_ms))
+                             s["vy"], s["sideslip"], self.solve_ms, errors=self.nearest[:2]))
         m["completed"] = self.completed
         m["reason"] = self.reason
         return m

@@ -74,9 +74,12 @@ def braking_distance(x: np.ndarray, vx: np.ndarray, v_ref: np.ndarray) -> float:
     return float(x[start + slow[0]] - x[start]) if slow.size else math.nan
 
 
-def limit_metrics(log: Any, track_m: float, radius_m: float) -> dict[str, Any]:
+def limit_metrics(log: Any, track_m: float, radius_m: float,
+                  nearest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                  ) -> dict[str, Any]:
     """The module docstring's metrics of a :class:`~fourws_bringup.core.closed_loop.
-    ClosedLoopLog` (``track_m``, ``radius_m``: the allocator's B and R)."""
+    ClosedLoopLog` (``track_m``, ``radius_m``: the allocator's B and R; ``nearest``: the
+    log's ``metrics.path_nearest`` when the caller has it)."""
     s, ref = log.state, log.reference
     vx = np.asarray(s["vx"], float)
     mu = np.mean(np.asarray(s["mu"], float).reshape(len(vx), -1), axis=1)
@@ -85,7 +88,7 @@ def limit_metrics(log: Any, track_m: float, radius_m: float) -> dict[str, Any]:
     with np.errstate(divide="ignore", invalid="ignore"):
         r_lim = np.where(vx > 1.0, mu * G / np.maximum(vx, 1.0), np.nan)
         ratio = r / r_lim
-    e_y, _, idx = path_nearest(ref, s["x"], s["y"], s["yaw"])
+    e_y, _, idx = path_nearest(ref, s["x"], s["y"], s["yaw"]) if nearest is None else nearest
     e_y = np.abs(e_y)
     v_ref = np.asarray(ref.speed, float)[idx]
     kappa = np.abs(np.asarray(ref.curvature, float))

@@ -115,10 +115,12 @@ def compute_metrics(lateral_error: Sequence[float], heading_error: Sequence[floa
 def run_metrics(ref: Reference, t: Sequence[float], x: Sequence[float], y: Sequence[float],
                 yaw: Sequence[float], vx: Sequence[float], vy: Sequence[float],
                 sideslip: Sequence[float] | None = None,
-                solve_ms: Sequence[float] | None = None) -> dict[str, float]:
-    """Metrics of a run from its poses: errors by :func:`path_errors`, sideslip as recorded
-    (or atan2(vy, vx) when not given). Also returns ``steps`` and ``sim_time_s``."""
-    e_y, e_phi = path_errors(ref, x, y, yaw)
+                solve_ms: Sequence[float] | None = None,
+                errors: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, float]:
+    """Metrics of a run from its poses: errors by :func:`path_errors` (or ``errors``, the
+    (e_Y, e_φ) the caller already has from them), sideslip as recorded (or atan2(vy, vx)
+    when not given). Also returns ``steps`` and ``sim_time_s``."""
+    e_y, e_phi = path_errors(ref, x, y, yaw) if errors is None else errors
     beta = (np.arctan2(np.asarray(vy, float), np.asarray(vx, float)) if sideslip is None
             else np.asarray(sideslip, float))
     out: dict[str, float] = compute_metrics(e_y, e_phi, beta, solve_ms)
