@@ -56,7 +56,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from typing import Any
@@ -167,22 +167,10 @@ def iso3888_steepness(
     def y_at(x: float, k1: float, k2: float) -> float:
         return h / 2.0 * (math.tanh(k1 * (x - xc1)) - math.tanh(k2 * (x - xc2)))
 
-    def violation(step: int, k1: float, k2: float) -> float:
-        return max(abs(y_at(x, k1, k2) - yc) - m for x, yc, m in checks[step])
+    def fits(i: int, k: list[float]) -> bool:
+        return max(abs(y_at(x, k[0], k[1]) - yc) - m for x, yc, m in checks[i + 1]) <= 0.0
 
-    k1 = k2 = 1.0
-    for _ in range(6):
-        for step in (1, 2):
-            lo, hi = 1e-3, 5.0
-            for _ in range(80):
-                mid = 0.5 * (lo + hi)
-                ok = violation(step, mid, k2) <= 0.0 if step == 1 else (
-                    violation(step, k1, mid) <= 0.0)
-                lo, hi = (lo, mid) if ok else (mid, hi)
-            if step == 1:
-                k1 = hi
-            else:
-                k2 = hi
+    k1, k2 = fit_steepness(fits, 2)
     return xc1, k1, xc2, k2
 
 
@@ -231,15 +219,34 @@ def cone_steepness(lanes: Sequence[tuple], vehicle_width_m: float, cone_margin_m
     y0 = lanes[0][2]
     checks = [[(a[1], a[2], fa), (b[0], b[2], fb)]
               for (a, b), (fa, fb) in zip(pairwise(lanes), pairwise(free), strict=True)]
-    for _ in range(6):
-        for i in range(len(steps)):
-            lo, hi = 1e-3, 5.0
-            for _ in range(80):
-                steps[i][2] = mid = 0.5 * (lo + hi)
-                ok = all(abs(_steps_y(x, y0, steps) - yc) <= m for x, yc, m in checks[i])
-                lo, hi = (lo, mid) if ok else (mid, hi)
-            steps[i][2] = hi
+    def fits(i: int, k: list[float]) -> bool:
+        for st, ki in zip(steps, k, strict=True):
+            st[2] = ki
+        return all(abs(_steps_y(x, y0, steps) - yc) <= m for x, yc, m in checks[i])
+
+    for st, ki in zip(steps, fit_steepness(fits, len(steps)), strict=True):
+        st[2] = ki
     return [tuple(st) for st in steps]
+
+
+#: :func:`fit_steepness`: fixed-point rounds over the steps, bisection steps per step, and the
+#: bracket of k (1/m)
+STEEPNESS_ROUNDS, STEEPNESS_BISECTIONS, STEEPNESS_BRACKET = 6, 80, (1e-3, 5.0)
+
+
+def fit_steepness(fits: Callable[[int, list[float]], bool], n_steps: int) -> list[float]:
+    """The smallest steepness k_i of each of ``n_steps`` tanh steps for which ``fits(i, k)``
+    holds (the body inside the cones next to step i, the other steps at their current k):
+    bisection on each step in turn, repeated for a few fixed-point rounds, from k = 1."""
+    k = [1.0] * n_steps
+    for _ in range(STEEPNESS_ROUNDS):
+        for i in range(n_steps):
+            lo, hi = STEEPNESS_BRACKET
+            for _ in range(STEEPNESS_BISECTIONS):
+                k[i] = mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if fits(i, k) else (mid, hi)
+            k[i] = hi
+    return k
 
 
 def iso3888_2(
