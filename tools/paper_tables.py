@@ -9,12 +9,12 @@ Usage (after ``source ros_ws/env.sh``; ``python tools/make_benchmark.py`` writes
 The paper scenarios are the bench's ``bench_dlc_60_mu05`` / ``bench_dlc_90_mu06`` (the
 paper's lane changes with a 30 s lead-out: every figure covers the lead-out too). The ideal
 world is the sweep's ``ideal`` condition (deterministic: one run), the realistic world its
-``all`` condition (``config/conditions/realistic.yaml``, seeds 0-4). ``lqr_ff`` (the outside
-reference) and ``improved_np30`` (beyond the paper: improved with N_p 30, N_c 10) are added
-to Tables 6 and 7; they are not in the rankings, which are the paper's. Margins come from
-``core.margins`` at the scenario's speed: the ideal loop, and 1 period of delay plus 40 ms
-of steering dead time told to the controller for the realistic world (the sensing noise and
-the estimated tyre forces are not in a linear margin).
+``all`` condition (``config/conditions/realistic.yaml``, over the sweep's seeds). ``lqr_ff``
+(the outside reference) and ``improved_np30`` (beyond the paper: improved with N_p 30,
+N_c 10) are added to Tables 6 and 7; they are not in the rankings, which are the paper's.
+Margins come from ``core.margins`` at the scenario's speed: the ideal loop, and the realistic
+condition's delay and steering dead time told to the controller (the sensing noise and the
+estimated tyre forces are not in a linear margin).
 """
 
 from __future__ import annotations
@@ -134,20 +134,34 @@ def tables(rows: list[dict[str, str]], margins: bool = True) -> str:
 
 
 def page(csv_path: str) -> str:
-    """docs/paper-tables.md: its header, then :func:`tables`."""
+    """docs/paper-tables.md: its header (the seeds from the rows, the told delays from the
+    realistic condition), then :func:`tables`."""
+    rows = read_rows(csv_path)
+    seeds = sorted({int(r["seed"]) for r in rows if r["condition"] == SWEEP_CONDITION[
+        "realistic"]})
+    cond = paper_condition("realistic")
+    told = (f"{cond.delay_periods} period{'s' if cond.delay_periods != 1 else ''} + "
+            f"{1e3 * cond.steer_dead_time_s:g} ms")
     head = (
         "# Tables 6-8 in both worlds (generated)\n\n"
         f"Generated {datetime.date.today()} by `python tools/paper_tables.py "
         "runs/benchmark/results.csv` from the robustness sweep of `docs/benchmark.md` "
         "(in-process loop; the paper scenarios with their 30 s lead-out, so every figure covers "
         "the lead-out too). Ideal: one deterministic run. Realistic (`all`): median (worst) over "
-        "seeds 0-4. ρ / GM / PM (phase lag) / DM (delay margin) from `fourws margins` "
-        "(realistic: 1 period + 40 ms told to the controller). `lqr_ff` (outside reference) and "
+        f"seeds {_span(seeds)}. ρ / GM / PM (phase lag) / DM (delay margin) from `fourws "
+        f"margins` (realistic: {told} told to the controller). `lqr_ff` (outside reference) and "
         "`improved_np30` (beyond the paper) stand beside Tables 6-7 and are not ranked. The "
         "presets with rear steer carry the LQR terminal cost (beyond the paper; `mpc_fws` "
         "cannot); every preset's scaling is the tuning procedure's (`docs/bench.md`, "
         "\"Tuning\"). Reading: `docs/results.md`.\n\n")
-    return head + tables(read_rows(csv_path)) + "\n"
+    return head + tables(rows) + "\n"
+
+
+def _span(seeds: list[int]) -> str:
+    """``0-4`` for consecutive seeds, else a comma list."""
+    if seeds and seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 1:
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ", ".join(map(str, seeds))
 
 
 def main(argv: list[str]) -> int:
