@@ -153,14 +153,26 @@ def main() -> int:
         rows = run_sweep(jobs, args.workers)
         (ROOT / "runs" / "limits").mkdir(parents=True, exist_ok=True)
         write_csv(rows, ROOT / "runs" / "limits" / "results.csv")
-    raised = [r for r in rows if str(r.get("reason", "")).startswith("raised")]
+    out = Path(args.out)
+    figs = figures(jobs, out.parent / "limits")
+    out.write_text(page(rows, figs), encoding="utf-8")
+    raised = _raised(rows)
+    print(f"{out}: {len(rows)} runs, {len(raised)} raised")
+    return 0 if not raised else 1
+
+
+def _raised(rows: list[dict]) -> list[dict]:
+    return [r for r in rows if str(r.get("reason", "")).startswith("raised")]
+
+
+def page(rows: list[dict], figs: list[str]) -> str:
+    """docs/limits.md from the sweep's rows and the figure files in docs/limits/."""
     from fourws_bringup.core.configs import load_mpc_config
 
+    raised = _raised(rows)
     shipped = {c: ("friction" if load_mpc_config(c).prediction_model == "single_track_friction"
                    else "linear") for c in L.CONTROLLERS if c != "lqr_ff"}
     by_case = L.with_shipped(L.cases(rows), shipped)
-    out = Path(args.out)
-    figs = figures(jobs, out.parent / "limits")
     twins = L.twin_failures(by_case)
     alloc_keys = (("max abs e_Y m", "max_abs_lateral_error_m", 3),
                   ("max abs heading error deg", "max_abs_heading_error_deg", 2),
@@ -271,9 +283,7 @@ def main() -> int:
         text += ["## Runs that raised", *(f"- {r['controller']} {r['scenario']} "
                                           f"{r['condition']} {r['seed']}: {r['reason']}"
                                           for r in raised[:20])]
-    out.write_text("\n".join(text) + "\n", encoding="utf-8")
-    print(f"{out}: {len(rows)} runs, {len(raised)} raised")
-    return 0 if not raised else 1
+    return "\n".join(text) + "\n"
 
 
 if __name__ == "__main__":

@@ -1,0 +1,35 @@
+"""``tools/make_limits.py`` builds docs/limits.md from real sweep rows: a handful of runs is
+enough to exercise every table and the printed rules (the full bench is ``make limits``)."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _make_limits(monkeypatch):
+    spec = importlib.util.spec_from_file_location("make_limits", ROOT / "tools" / "make_limits.py")
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_page_is_built_from_a_few_rows_with_its_rules_and_tables(monkeypatch):
+    from fourws_bringup.sweep import load_spec, run_job
+
+    ml = _make_limits(monkeypatch)
+    jobs = [j for j in load_spec(ml.SPEC)
+            if j.condition.seed == 0 and ml.L.scenario_name(j.scenario) == "ladder_dlc_60_mu05_060"
+            and (j.controller, j.condition.name) in {("improved", "ideal_friction"),
+                                                     ("lqr_ff", "ideal")}]
+    assert len(jobs) == 2
+    text = ml.page([run_job(j) for j in jobs], ["phase_plane.png"])
+    assert text.startswith("# Limit handling")
+    for rule in ml.L.RULES:
+        assert f"* {rule}" in text
+    assert "## Headline: highest rung or speed passed clean" in text
+    assert "| improved | ideal_shipped |" in text and "| lqr_ff | ideal_shipped |" in text
+    assert "![phase_plane.png](limits/phase_plane.png)" in text
+    assert "## Runs that raised" not in text
