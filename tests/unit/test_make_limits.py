@@ -1,25 +1,13 @@
 """``tools/make_limits.py`` builds docs/limits.md from real sweep rows: a handful of runs is
 enough to exercise every table and the printed rules (the full bench is ``make limits``)."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _make_limits(monkeypatch):
-    spec = importlib.util.spec_from_file_location("make_limits", ROOT / "tools" / "make_limits.py")
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, spec.name, module)
-    spec.loader.exec_module(module)
-    return module
+from script_helpers import load_script
 
 
 def test_the_page_is_built_from_a_few_rows_with_its_rules_and_tables(monkeypatch):
     from fourws_bringup.sweep import load_spec, run_job
 
-    ml = _make_limits(monkeypatch)
+    ml = load_script("tools/make_limits.py", monkeypatch)
     jobs = [j for j in load_spec(ml.SPEC)
             if j.condition.seed == 0 and ml.L.scenario_name(j.scenario) == "ladder_dlc_60_mu05_060"
             and (j.controller, j.condition.name) in {("improved", "ideal_friction"),

@@ -312,26 +312,22 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
     at = {g: k for k, (g, _, _) in enumerate(kept)}
     set_aside: set[int] = set()
     while True:
-        full = [(score(k), kept[k][2], k) for k in order
-                if complete(k) and k not in set_aside and math.isfinite(score(k))]
-        bar = min(full)[0] if full else math.inf
-        todo = [k for k in order if not complete(k) and score(k) <= bar
-                and math.isfinite(score(k))]     # could beat the best once finished
-        if full:
-            todo += [at[g] for g in neighbours(kept[min(full)[2]][0], n)
-                     if g in at and not complete(at[g]) and at[g] not in todo
-                     and math.isfinite(score(at[g]))]    # an abort is known already
-        if todo:
+        b = min(((score(k), kept[k][2], k) for k in order
+                 if complete(k) and k not in set_aside and math.isfinite(score(k))),
+                default=None)
+        near = [at[g] for g in neighbours(kept[b[2]][0], n) if g in at] if b else []
+        todo = [k for k in dict.fromkeys(
+                    [k for k in order if b is None or score(k) <= b[0]] + near)
+                if not complete(k) and math.isfinite(score(k))]
+        if todo:            # could beat b once finished, or b's neighbours (an abort is known)
             run([(k, j) for k in todo for j in jobs[k][done[k]:]])
             for k in todo:
                 say(k)
             continue
-        if not full:
+        if b is None:
             raise ValueError(f"group {group.name}: every candidate aborts or sits next "
                              "to one that aborts; widen grid_exponents")
-        b = min(full)
-        if all(math.isfinite(score(at[g])) for g in neighbours(kept[b[2]][0], n)
-               if g in at):
+        if all(math.isfinite(score(k)) for k in near):
             best = b
             break
         set_aside.add(b[2])
