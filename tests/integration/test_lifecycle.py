@@ -477,23 +477,31 @@ def _assert_started_on_the_answer(run) -> None:
 def test_a_realtime_mpc_stall_gives_a_safe_hold_and_no_backlog(graph, ros, tmp_path):
     """SIGSTOP the MPC for 2 s of a realtime run: the plant counts late commands and holds
     safe (steer held, torques 0) after command_hold_timeout_s (0.5 s); resumed, the MPC
-    answers the newest state, not the 200 it missed. The bag starts at step 0."""
+    answers the newest state, not the 200 it missed. The bag starts at step 0.
+
+    The stall is timed on the graph, not by sleeps: the plant waits for this test's state
+    subscription, made only once every node is up, so the test sees the run from its start;
+    the MPC stays stopped until the test has seen the plant step 200 times past the stop."""
     status = tmp_path / "status.json"
     # 100 m, about 6 s: 1 s of run, the 2 s stall, 3 s after it
     specs = graph_specs(str(_cut(tmp_path, 100.0)), CONTROLLER, tmp_path / "bag",
                                mode="realtime", status_file=status)
     specs[0].parameters["wait_for_subscribers"] = 5  # the test's own subscription too
-    states = _record_states(ros)
     sup = graph(specs)
     mpc_pid = sup.procs["mpc_node"].popen.pid
-    assert ros.spin_until(lambda: any(stamp_to_ns(m.header.stamp) >= 100 * STEP_NS
-                                      for m in states), 60), "the run did not start"
+    states = _record_states(ros)  # the plant starts on this subscription
 
+    def newest() -> int:  # a reliable stream arrives in order
+        return stamp_to_ns(states[-1].header.stamp) // STEP_NS if states else -1
+
+    assert ros.spin_until(lambda: newest() >= 100, 60), "the run did not start"
     os.kill(mpc_pid, signal.SIGSTOP)
     try:
-        time.sleep(2.0)  # the stall itself
+        stopped_at = newest()
+        stalled = ros.spin_until(lambda: newest() >= stopped_at + 200, 30)
     finally:
         os.kill(mpc_pid, signal.SIGCONT)
+    assert stalled, f"the plant did not step on while the MPC stood (newest {newest()})"
     assert sup.wait_exit("plant_node", timeout_s=60) in RUN_END_CODES
     sup.stop()
     st = json.loads(status.read_text())
