@@ -24,7 +24,7 @@ def _random_model(rng, n):
     return Ak, Bk, dk
 
 
-def _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W):
+def _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W, n_levels=2):
     n_p = ref.shape[0]
     Aa, Ba, da = Q.augment(Ak, Bk, dk)
     xi = np.concatenate([zeta, u_prev])
@@ -44,16 +44,16 @@ def _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W):
         H += 2.0 * (M.T @ (wl[:, None] * M))
         g += 2.0 * M.T @ (wl * np.tile(u_prev, n_c))
     if W is not None:
-        Zx, Zu, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c)
+        Zx, Zu, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c, n_levels=n_levels)
         hess, cross = T.terminal_terms(W, Zu * D[None, :])
         H += hess
-        g += cross @ (Zx @ xi + Zd @ da - T.reference_rows(ref, Ak.shape[0]))
+        g += cross @ (Zx @ xi + Zd @ da - T.reference_rows(ref, Ak.shape[0], n_levels))
     return H, g, th_out, e_free, th_hard, free[:, 2:].reshape(-1)
 
 
 @pytest.mark.parametrize("n", [6, 8, 10])
 @pytest.mark.parametrize("n_p,n_c", [(1, 1), (2, 1), (12, 6), (30, 10), (10, 10)])
-@pytest.mark.parametrize("terms", ["paper", "level", "terminal", "both"])
+@pytest.mark.parametrize("terms", ["paper", "level", "terminal", "both", "terminal_y"])
 def test_compiled_condensing_equals_the_numpy_forms(n, n_p, n_c, terms):
     rng = np.random.default_rng(1000 * n + 10 * n_p + n_c)
     Ak, Bk, dk = _random_model(rng, n)
@@ -65,16 +65,17 @@ def test_compiled_condensing_equals_the_numpy_forms(n, n_p, n_c, terms):
     r_eff = rng.uniform(0.1, 10.0, N_INPUT)
     s_level = rng.uniform(0.1, 1.0, N_INPUT) if terms in ("level", "both") else np.zeros(3)
     W = None
-    if terms in ("terminal", "both"):
-        n_z = len(T.lateral_rows(n)) + 2
+    n_levels = 1 if terms == "terminal_y" else 2      # front steer alone: Y's level only
+    if terms in ("terminal", "both", "terminal_y"):
+        n_z = len(T.lateral_rows(n)) + n_levels
         X = rng.normal(size=(n_z, n_z))
         W = X @ X.T
-    want = _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W)
+    want = _oracle(Ak, Bk, dk, zeta, u_prev, ref, n_c, D, q_eff, r_eff, s_level, W, n_levels)
     Aa, Ba, da = Q.augment(Ak, Bk, dk)
     got = condense(Aa, Ba, da, np.concatenate([zeta, u_prev]), Q._OUT_ROWS, n_c, D, ref,
-                   q_eff, r_eff, u_prev, s_level, T.lateral_rows(n), T.output_index(n),
-                   np.zeros((0, 0)) if W is None else W,
-                   np.zeros(3) if W is None else T.reference_rows(ref, n))
+                   q_eff, r_eff, u_prev, s_level, T.lateral_rows(n),
+                   T.output_index(n, n_levels), np.zeros((0, 0)) if W is None else W,
+                   np.zeros(3) if W is None else T.reference_rows(ref, n, n_levels))
     for name, a, b in zip(("H", "g", "th_out", "e_free", "th_hard", "hard_free"), got, want,
                           strict=True):
         scale = max(np.abs(b).max(), 1e-300)

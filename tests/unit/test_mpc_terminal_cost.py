@@ -1,6 +1,7 @@
 """The velocity-form LQR terminal cost (``terminal_cost``, beyond the paper): with it, the
 unconstrained MPC whose control horizon spans its prediction horizon is the infinite-horizon
-LQR of the same stage cost, whatever the horizon."""
+LQR of the same stage cost, whatever the horizon (with front steer alone, of the stage cost
+without the heading level, which its terminal cost leaves out)."""
 
 from __future__ import annotations
 
@@ -78,10 +79,44 @@ def test_with_the_terminal_cost_the_first_move_is_the_infinite_horizon_lqr(enabl
         assert not np.allclose(plain.du[0][en], lqr_du, rtol=1e-2)
 
 
+@pytest.mark.parametrize("n_p", [4, 12, 30])
+def test_front_steer_alone_its_first_move_is_the_lqr_without_the_heading_level(n_p):
+    """Front steer alone, z carries Y's level only. With q_φ = 0 (the stage cost its DARE
+    prices) the QP's first increment equals −K z0 of the DARE for every horizon; without the
+    terminal cost it does not."""
+    cfg = MpcConfig(use_rear_steer=False, use_dyc=False, q_phi=0.0)
+    zeta, Ak, Bk, dk = _straight_model(cfg)
+    zeta[StateIdx.Y] = 0.01
+    q_eff, r_eff = _weights(cfg)
+    en = cfg.enabled
+    A_z, B_z = T.velocity_form(Ak, Bk, en)
+    n_z = A_z.shape[0]
+    assert n_z == len(T.lateral_rows(Ak.shape[0])) + 1
+    Q_z = np.zeros((n_z, n_z))
+    Q_z[-1, -1] = q_eff[1]
+    R = np.diag(r_eff[en])
+    P = scipy.linalg.solve_discrete_are(A_z, B_z, Q_z, R)
+    K = np.linalg.solve(R + B_z.T @ P @ B_z, B_z.T @ P @ A_z)
+    z0 = np.zeros(n_z)
+    z0[-1] = 0.01
+    W = T.terminal_weight(Ak, Bk, en, q_eff, r_eff)
+    np.testing.assert_allclose(W, P - Q_z, rtol=0, atol=1e-9 * np.abs(P).max())
+    qp = Q.MpcQp()
+    args = (Ak, Bk, dk, zeta, np.zeros(N_INPUT), np.zeros((n_p, 2)), n_p, n_p, q_eff, r_eff,
+            1.0e6, _wide_bounds(en))
+    sol = qp.solve(*args, terminal_w=W)
+    np.testing.assert_allclose(sol.du[0][en], -K @ z0, rtol=1e-5, atol=1e-9)
+    np.testing.assert_array_equal(sol.du[0][~en], 0.0)
+    if n_p <= 12:
+        assert not np.allclose(qp.solve(*args).du[0][en], -K @ z0, rtol=1e-2)
+
+
+@pytest.mark.parametrize("n_levels", [2, 1])
 @pytest.mark.parametrize("n_p,n_c", [(12, 5), (3, 3), (1, 1)])
-def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan(n_p, n_c):
+def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan(n_p, n_c, n_levels):
     """Zx ξ + Zu ΔU + Zd d̃ against an explicit simulation of the augmented model over the
-    horizon, the input held after N_c (random state, plan and affine term)."""
+    horizon, the input held after N_c (random state, plan and affine term); with φ and Y's
+    levels, and with Y's alone."""
     cfg = MpcConfig()
     _, Ak, Bk, _ = _straight_model(cfg)
     rng = np.random.default_rng(3)
@@ -89,14 +124,14 @@ def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan(n_p, n_c)
     Aa, Ba, da = Q.augment(Ak, Bk, dk)
     xi0 = rng.normal(size=Aa.shape[0]) * 0.01
     dU = rng.normal(size=(n_c, N_INPUT)) * np.array([0.01, 0.01, 100.0])
-    Zx, Zu, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c)
+    Zx, Zu, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c, n_levels=n_levels)
     xs = [xi0]
     for i in range(n_p):
         du = dU[i] if i < n_c else np.zeros(N_INPUT)
         xs.append(Aa @ xs[-1] + Ba @ du + da)
     rows = T.lateral_rows(Ak.shape[0])
-    expected = np.concatenate([xs[n_p][rows] - xs[n_p - 1][rows],
-                               xs[n_p][[StateIdx.PHI, StateIdx.Y]]])
+    levels = [StateIdx.PHI, StateIdx.Y][2 - n_levels:]
+    expected = np.concatenate([xs[n_p][rows] - xs[n_p - 1][rows], xs[n_p][levels]])
     np.testing.assert_allclose(Zx @ xi0 + Zu @ dU.reshape(-1) + Zd @ da, expected,
                                rtol=1e-9, atol=1e-12)
 
@@ -145,18 +180,26 @@ def test_the_reference_enters_with_its_sign():
     np.testing.assert_allclose(moves[0], moves[1], rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("enabled", [(True, False, False), (False, False, False)])
-def test_fewer_inputs_than_outputs_is_a_clear_error(enabled):
-    """Front steer alone: the velocity form has an unstabilisable mode at 1 (PBH), so no
-    stabilising DARE solution exists; the refusal names the reason."""
+def test_front_steer_alone_cannot_hold_both_levels_but_can_hold_y():
+    """Why z carries Y's level alone with one input: with both levels the velocity form has
+    a mode at 1 that the one input cannot steer (PBH rank), so no stabilising DARE solution
+    exists; with Y's alone it is stabilisable. No input at all is a clear error."""
     cfg = MpcConfig()
     _, Ak, Bk, _ = _straight_model(cfg)
     q_eff, r_eff = _weights(cfg)
-    A_z, B_z = T.velocity_form(Ak, Bk, np.array(enabled))
-    n = A_z.shape[0]
-    assert np.linalg.matrix_rank(np.hstack([A_z - np.eye(n), B_z])) < n
-    with pytest.raises(ValueError, match="as many inputs as outputs"):
-        T.terminal_weight(Ak, Bk, np.array(enabled), q_eff, r_eff)
+    n = Ak.shape[0]
+    rows, cols = T.lateral_rows(n), np.array([0])
+    for n_levels, stabilisable in ((2, False), (1, True)):
+        A_z, B_z = T._velocity_form(np.ascontiguousarray(Ak), np.ascontiguousarray(Bk), rows,
+                                    cols, T.output_index(n, n_levels))
+        n_z = A_z.shape[0]
+        rank = np.linalg.matrix_rank(np.hstack([A_z - np.eye(n_z), B_z]))
+        assert (rank == n_z) == stabilisable, (n_levels, rank, n_z)
+    W = T.terminal_weight(Ak, Bk, np.array([True, False, False]), q_eff, r_eff)
+    assert W.shape == (len(rows) + 1,) * 2
+    assert np.all(np.linalg.eigvalsh(W) > -1e-9 * np.abs(W).max())
+    with pytest.raises(ValueError, match="no input enabled"):
+        T.terminal_weight(Ak, Bk, np.zeros(3, bool), q_eff, r_eff)
 
 
 def _dare_residual(A, B, Q, R, P):
@@ -207,12 +250,6 @@ def test_a_dare_without_a_stabilising_solution_is_a_clear_error():
     B = np.array([[0.0], [1.0]])
     with pytest.raises(np.linalg.LinAlgError, match="no stabilising solution"):
         T.solve_dare(A, B, np.eye(2), np.eye(1))
-
-
-def test_a_front_steer_preset_with_it_is_refused_at_start_up():
-    with pytest.raises(ValueError, match="two inputs"):
-        MpcConfig(use_rear_steer=False, use_dyc=False, terminal_cost="lqr")
-    MpcConfig(use_rear_steer=True, use_dyc=False, terminal_cost="lqr")
 
 
 def test_the_margins_gain_is_the_controllers_first_move():

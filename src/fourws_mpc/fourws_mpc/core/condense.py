@@ -15,7 +15,8 @@ With the augmented model ξ(k+1) = Ã ξ + B̃ Δu + d̃ of eq. (5), the stages 
 3. **cost** H = 2 Θ_yᵀ Q Θ_y + 2 diag(R D²), g = 2 Θ_yᵀ Q (y_free − y_ref) over the outputs
    (φ, Y); the input-level penalty adds 2 Mᵀ diag(w) M and 2 Mᵀ diag(w) u(k−1);
    the terminal cost adds 2 Z_sᵀ W Z_s and 2 Z_sᵀ W (z_free − z_ref) with the velocity-form
-   rows Z of ``terminal_cost`` (lateral rows of ξ_Np − ξ_{Np−1}, then φ and Y of ξ_Np);
+   rows Z of ``terminal_cost`` (lateral rows of ξ_Np − ξ_{Np−1}, then φ and Y of ξ_Np, or Y
+   alone);
 4. **constraints**: the rows of Θ for the hard (v_y, r) and the soft (φ, Y) bounds and their
    bounds, in the row order of :class:`~fourws_mpc.core.qp.QpLayout`.
 """
@@ -72,7 +73,8 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
     ``out_rows`` = (φ, Y, v_y, r) rows of ξ; ``ref`` (N_p, 2) = [φ_ref, Y_ref] at
     i = 1..N_p; ``D`` (3N_c,) = Δu_max tiled; ``s_level`` (3,) the level weights (zeros:
     none); ``W`` the terminal weight on z (0×0: none), ``lat_rows`` and ``out_pos`` its
-    lateral rows of ξ and where φ, Y sit among them, ``z_ref`` its reference part.
+    lateral rows of ξ and where its levelled outputs (φ and Y, or Y) sit among them, ``z_ref``
+    its reference part.
     """
     n_p = ref.shape[0]
     nu = Ba.shape[1]
@@ -117,15 +119,16 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
     if W.shape[0] > 0:
         n_l = lat_rows.shape[0]
         th_l = _theta(T, lat_rows, n_c, D)
-        Zs = np.empty((n_l + 2, ncol))
-        z = np.empty(n_l + 2)
+        n_e = out_pos.shape[0]
+        Zs = np.empty((n_l + n_e, ncol))
+        z = np.empty(n_l + n_e)
         for o in range(n_l):
             r = lat_rows[o]
             Zs[o] = th_l[n_p - 1, o]
             if n_p >= 2:
                 Zs[o] -= th_l[n_p - 2, o]
             z[o] = x[n_p, r] - x[n_p - 1, r] - z_ref[o]
-        for o in range(2):
+        for o in range(n_e):
             Zs[n_l + o] = th_l[n_p - 1, out_pos[o]]
             z[n_l + o] = x[n_p, lat_rows[out_pos[o]]] - z_ref[n_l + o]
         cross = 2.0 * (np.ascontiguousarray(Zs.T) @ W)

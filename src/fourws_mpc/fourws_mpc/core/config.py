@@ -244,10 +244,6 @@ class MpcConfig:
         if self.nc_min > self.nc_max:
             raise ValueError(f"nc_min, nc_max: need nc_min <= nc_max, got {self.nc_min}, "
                              f"{self.nc_max}")
-        if self.terminal_cost == "lqr" and np.count_nonzero(self.enabled) < 2:
-            raise ValueError("terminal_cost: lqr needs two inputs for the two outputs (rear "
-                             "steer or DYC); front steer alone has no velocity-form terminal "
-                             "cost (terminal_cost.py)")
         if self.nc_baseline > self.np_baseline:
             raise ValueError("nc_baseline, np_baseline: need N_c <= N_p, got "
                              f"{self.nc_baseline} > {self.np_baseline}")

@@ -158,18 +158,18 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
 
 
 def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, n_p: int, n_c: int,
-                  powers: np.ndarray | None = None
+                  powers: np.ndarray | None = None, n_levels: int = 2
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Zx, Zu, Zd) with z_Np + z_ref = Zx ξ + Zu ΔU + Zd d̃: the velocity-form state of
     ``terminal_cost`` at the horizon's end (the lateral rows of ξ_Np − ξ_{Np−1}, then φ and
-    Y of ξ_Np), from the condensed prediction of the lateral rows (:func:`prediction_matrices`,
-    eq. (6); ΔU step-major, the input held after N_c); z_ref is
+    Y of ξ_Np; Y alone for ``n_levels`` 1), from the condensed prediction of the lateral rows
+    (:func:`prediction_matrices`, eq. (6); ΔU step-major, the input held after N_c); z_ref is
     ``terminal_cost.reference_rows``. ``powers`` as for :func:`prediction_matrices`."""
     n = Aa.shape[0] - Ba.shape[1]
     sel = output_matrix(tuple(lateral_rows(n)), n)
     n_l = sel.shape[0]
     psi, theta, gamma = prediction_matrices(Aa, Ba, sel, n_p, n_c, powers)
-    out = list(output_positions(n))
+    out = list(output_positions(n, n_levels))
     end = slice((n_p - 1) * n_l, n_p * n_l)
     before = slice((n_p - 2) * n_l, (n_p - 1) * n_l)
 
@@ -301,6 +301,16 @@ class QpLayout:
         return np.vstack([top, eps_row, ub, soft, soft, soft, soft])
 
 
+def _terminal(terminal_w: np.ndarray | None, ref: np.ndarray, n: int
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W, z_ref, positions of the levelled outputs) for ``condense``; W's size says how many
+    output levels z carries (``terminal_cost.levelled_outputs``)."""
+    if terminal_w is None:
+        return _NO_TERMINAL, _ZERO_U, output_index(n)
+    n_levels = terminal_w.shape[0] - len(lateral_rows(n))
+    return terminal_w, reference_rows(ref, n, n_levels), output_index(n, n_levels)
+
+
 def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows/cols of a pattern sorted into CSC storage order (column-major)."""
     order = np.lexsort((rows, cols))
@@ -319,14 +329,13 @@ def unconstrained_gain(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, n_p: int,
     Aa, Ba, da = augment(Ak, Bk, dk)
     D = np.tile(np.asarray(du_max, dtype=float), n_c)
     ref = np.zeros((n_p, 2))
-    W, z_ref = ((_NO_TERMINAL, _ZERO_U) if terminal_w is None
-                else (terminal_w, reference_rows(ref, n)))
+    W, z_ref, out = _terminal(terminal_w, ref, n)
     level = _ZERO_U if s_level is None else s_level
 
     def cost(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         H, g, *_ = condense(Aa, Ba, da, xi, _OUT_ROWS, n_c, D, ref, q_eff, r_eff,
-                            np.ascontiguousarray(xi[n:]), level, lateral_rows(n),
-                            output_index(n), W, z_ref)
+                            np.ascontiguousarray(xi[n:]), level, lateral_rows(n), out, W,
+                            z_ref)
         return H, g
 
     H, g0 = cost(np.zeros(n + N_INPUT))
@@ -377,7 +386,8 @@ class MpcQp:
         optional primal warm start in units of Δu_max; s_level (3,) the effective weights of
         the input-level penalty (``input_level_cost``; None or zeros: the paper's cost);
         terminal_w the weight W of the velocity-form terminal cost z_Npᵀ W z_Np
-        (``terminal_cost.terminal_weight``; None: the paper's cost, none).
+        (``terminal_cost.terminal_weight``; its size says whether z carries the levels of
+        φ and Y or of Y alone; None: the paper's cost, none).
         """
         nu = N_INPUT
         inst = self.instance(n_p, n_c)
@@ -385,14 +395,11 @@ class MpcQp:
         Aa, Ba, da = augment(Ak, Bk, dk)
         xi = np.concatenate([zeta0, u_prev])
         D, en, band = inst.tiled(bounds)
-        if terminal_w is None:
-            W, z_ref = _NO_TERMINAL, _ZERO_U
-        else:
-            W, z_ref = terminal_w, reference_rows(ref, n)
+        W, z_ref, out = _terminal(terminal_w, ref, n)
         H, g, th_out, e_free, th_hard, hard_free = condense(
             Aa, Ba, da, xi, _OUT_ROWS, n_c, D, np.ascontiguousarray(ref, dtype=float),
             q_eff, r_eff, u_prev, _ZERO_U if s_level is None else s_level,
-            lateral_rows(n), output_index(n), W, z_ref)
+            lateral_rows(n), out, W, z_ref)
         qvec = np.concatenate([g, [0.0]])
         A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
         constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en,

@@ -8,8 +8,12 @@ states x_L (all but v_x and X) and the enabled inputs::
 
 Δx_L,ref holds the reference's last increments of φ and Y (zero elsewhere). P solves the DARE
 of (A_z, B_z, diag(0, Q), R); the weight added at the horizon's end is W = P − diag(0, Q).
-With front steer alone (one input, two outputs) a mode at 1 is not stabilisable and
-:func:`terminal_weight` refuses.
+
+With front steer alone (one input) z carries the level of Y only (:func:`levelled_outputs`):
+with both levels the modes at 1 of e_φ and e_Y are two eigenvectors one input cannot steer
+(PBH). Physically, a front-steered car in steady cornering keeps a heading error equal to its
+sideslip, so a cost on the φ level never ends; its increments stay in Δx_L, and the heading
+still costs through the Y it moves.
 """
 
 from __future__ import annotations
@@ -27,6 +31,14 @@ NOT_LATERAL = (StateIdx.VX, StateIdx.X)
 OUTPUTS = (StateIdx.PHI, StateIdx.Y)
 
 
+def levelled_outputs(n_inputs: int) -> tuple[int, ...]:
+    """The outputs whose levels z carries with ``n_inputs`` enabled inputs: φ and Y with two
+    or more, Y alone with one (module docstring); always the last of :data:`OUTPUTS`."""
+    if n_inputs < 1:
+        raise ValueError("terminal cost: no input enabled")
+    return OUTPUTS if n_inputs >= len(OUTPUTS) else OUTPUTS[-1:]
+
+
 @lru_cache(maxsize=8)
 def lateral_rows(n_state: int) -> np.ndarray:
     """Indices of the lateral states of a model with ``n_state`` states (appended states,
@@ -36,18 +48,19 @@ def lateral_rows(n_state: int) -> np.ndarray:
     return rows
 
 
-@lru_cache(maxsize=8)
-def output_positions(n_state: int) -> tuple[int, ...]:
-    """Where the outputs φ, Y (``OUTPUTS``) sit among :func:`lateral_rows`."""
+@lru_cache(maxsize=16)
+def output_positions(n_state: int, n_levels: int = len(OUTPUTS)) -> tuple[int, ...]:
+    """Where the last ``n_levels`` outputs of ``OUTPUTS`` (φ, Y; or Y alone) sit among
+    :func:`lateral_rows`."""
     rows = list(lateral_rows(n_state))
-    return tuple(rows.index(o) for o in OUTPUTS)
+    return tuple(rows.index(o) for o in OUTPUTS[len(OUTPUTS) - n_levels:])
 
 
 @njit(cache=True)
 def _velocity_form(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                    out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(A_z, B_z) from the lateral ``rows`` of A_k, B_k, the enabled input ``cols`` and the
-    positions ``out`` of φ, Y among the rows (:func:`velocity_form`)."""
+    positions ``out`` of the levelled outputs among the rows (:func:`velocity_form`)."""
     n_l, n_e, n_in = rows.shape[0], out.shape[0], cols.shape[0]
     A_z = np.zeros((n_l + n_e, n_l + n_e))
     B_z = np.empty((n_l + n_e, n_in))
@@ -63,10 +76,10 @@ def _velocity_form(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.nd
     return A_z, B_z
 
 
-@lru_cache(maxsize=8)
-def output_index(n_state: int) -> np.ndarray:
+@lru_cache(maxsize=16)
+def output_index(n_state: int, n_levels: int = len(OUTPUTS)) -> np.ndarray:
     """:func:`output_positions` as a read-only index array (what the compiled kernels take)."""
-    pos = np.array(output_positions(n_state), dtype=np.int64)
+    pos = np.array(output_positions(n_state, n_levels), dtype=np.int64)
     pos.flags.writeable = False
     return pos
 
@@ -79,13 +92,14 @@ def _indices(n_state: int, enabled: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 def _indices_of(n_state: int, enabled: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cols = np.flatnonzero(np.frombuffer(enabled, dtype=bool))
     cols.flags.writeable = False
-    return lateral_rows(n_state), cols, output_index(n_state)
+    return lateral_rows(n_state), cols, output_index(n_state,
+                                                     len(levelled_outputs(cols.shape[0])))
 
 
 def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """(A_z, B_z) of the velocity-form lateral model (module docstring); B_z has a column per
-    enabled input."""
+    enabled input, z the levels of :func:`levelled_outputs` of their number."""
     f = np.ascontiguousarray
     return _velocity_form(f(Ak, dtype=float), f(Bk, dtype=float),
                           *_indices(Ak.shape[0], enabled))
@@ -93,14 +107,15 @@ def velocity_form(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray
 
 @njit(cache=True)
 def _terminal_weight(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                     out: np.ndarray, q_eff: np.ndarray, r_en: np.ndarray, rtol: float,
+                     out: np.ndarray, q_lev: np.ndarray, r_en: np.ndarray, rtol: float,
                      max_steps: int) -> tuple[np.ndarray, bool]:
-    """(W, converged) of :func:`terminal_weight`, compiled."""
+    """(W, converged) of :func:`terminal_weight`, compiled; ``q_lev`` the weights of the
+    levelled outputs."""
     A_z, B_z = _velocity_form(Ak, Bk, rows, cols, out)
     n_z, n_e = A_z.shape[0], out.shape[0]
     Q_z = np.zeros((n_z, n_z))
     for e in range(n_e):
-        Q_z[n_z - n_e + e, n_z - n_e + e] = q_eff[e]
+        Q_z[n_z - n_e + e, n_z - n_e + e] = q_lev[e]
     P, ok = _sda(A_z, B_z, Q_z, np.diag(r_en), rtol, max_steps)
     W = P - Q_z
     return 0.5 * (W + W.T), ok
@@ -108,8 +123,9 @@ def _terminal_weight(Ak: np.ndarray, Bk: np.ndarray, rows: np.ndarray, cols: np.
 
 def terminal_weight(Ak: np.ndarray, Bk: np.ndarray, enabled: np.ndarray,
                     q_eff: np.ndarray, r_eff: np.ndarray) -> np.ndarray:
-    """W = P − Q_z on z = [Δx_L; φ − φ_ref; Y − Y_ref] at the horizon's end, P the DARE's
-    stabilising solution on (A_z, B_z, Q_z = diag(0, Q), R) (:func:`solve_dare`).
+    """W = P − Q_z on z = [Δx_L; φ − φ_ref; Y − Y_ref] at the horizon's end (Y − Y_ref alone
+    with front steer alone), P the DARE's stabilising solution on (A_z, B_z, Q_z = diag(0, Q),
+    R) (:func:`solve_dare`).
 
     Ak (n, n), Bk (n, 3): the discrete model of the step; enabled (3,) bool: the inputs the
     preset uses; q_eff (2,) = [q_φ, q_Y], r_eff (3,): the effective weights the QP uses (SI
@@ -139,12 +155,9 @@ class TerminalWeight:
                  q_eff: np.ndarray, r_eff: np.ndarray) -> np.ndarray:
         """W of :func:`terminal_weight`, with its errors; a failed solve is not kept."""
         rows, cols, out = _indices(Ak.shape[0], enabled)
-        if cols.shape[0] < len(OUTPUTS):
-            raise ValueError(f"terminal cost: the velocity form needs as many inputs as "
-                             f"outputs ({len(OUTPUTS)}); {cols.shape[0]} enabled leave a mode "
-                             "at 1 it cannot steer (front steer alone: no terminal cost)")
         f = np.ascontiguousarray
-        data = (f(Ak, dtype=float), f(Bk, dtype=float), f(q_eff, dtype=float),
+        q = np.asarray(q_eff, dtype=float)
+        data = (f(Ak, dtype=float), f(Bk, dtype=float), f(q[q.shape[0] - out.shape[0]:]),
                 f(np.asarray(r_eff, dtype=float)[cols]))
         last = self._last
         if (last is not None and last[0] is cols and last[1].shape == data[0].shape
@@ -264,15 +277,17 @@ def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np
     return P
 
 
-def reference_rows(ref: np.ndarray, n_state: int) -> np.ndarray:
+def reference_rows(ref: np.ndarray, n_state: int, n_levels: int = len(OUTPUTS)
+                   ) -> np.ndarray:
     """z_ref: the reference's part of z at the horizon's end (module docstring) for a model
     of ``n_state`` states, from ``ref`` (N_p, 2) = [φ_ref, Y_ref] at i = 1..N_p: the last
-    step's increments of φ_ref and Y_ref in the Δx rows of φ and Y, then φ_ref and Y_ref."""
+    step's increments of φ_ref and Y_ref in the Δx rows of φ and Y, then the levels of the
+    last ``n_levels`` outputs (φ_ref and Y_ref, or Y_ref alone)."""
     n_l = len(lateral_rows(n_state))
-    z = np.zeros(n_l + len(OUTPUTS))
+    z = np.zeros(n_l + n_levels)
     prev = ref[-2] if len(ref) >= 2 else np.zeros(len(OUTPUTS))
     z[list(output_positions(n_state))] = ref[-1] - prev
-    z[n_l:] = ref[-1]
+    z[n_l:] = ref[-1][len(OUTPUTS) - n_levels:]
     return z
 
 
