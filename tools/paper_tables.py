@@ -151,9 +151,9 @@ def page(csv_path: str) -> str:
         f"seeds {_span(seeds)}. ρ / GM / PM (phase lag) / DM (delay margin) from `fourws "
         f"margins` (realistic: {told} told to the controller). `lqr_ff` (outside reference) and "
         "`improved_np30` (beyond the paper) stand beside Tables 6-7 and are not ranked. The "
-        "presets with rear steer carry the LQR terminal cost (beyond the paper; `mpc_fws` "
-        "cannot); every preset's scaling is the tuning procedure's (`docs/bench.md`, "
-        "\"Tuning\"). Reading: `docs/results.md`.\n\n")
+        "MPC presets carry the LQR terminal cost (beyond the paper; `mpc_fws`'s prices Y's "
+        "level alone, `docs/mpc.md`); every preset's scaling is the tuning procedure's "
+        "(`docs/bench.md`, \"Tuning\"). Reading: `docs/results.md`.\n\n")
     return head + tables(rows) + "\n"
 
 

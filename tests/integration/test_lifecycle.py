@@ -142,7 +142,8 @@ def test_fourws_run_exits_with_the_runs_outcome(tmp_path):
                             .read_text(encoding="utf-8"))
     preset["/**/mpc_node"]["ros__parameters"].update(
         controller="paper_mpc_fws", prediction_model="single_track",
-        prediction_discretisation="euler", scale_y_m=0.0059, scale_phi_deg=0.30)
+        prediction_discretisation="euler", scale_y_m=0.0059, scale_phi_deg=0.30,
+        terminal_cost="none")
     path = tmp_path / "paper_mpc_fws.yaml"
     path.write_text(yaml.safe_dump(preset), encoding="utf-8")
     r = subprocess.run(["fourws", "run", "--scenario", "dlc_60_mu05", "--controller",

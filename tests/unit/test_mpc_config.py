@@ -63,8 +63,8 @@ def test_presets_load(name):
 
 
 def test_presets_share_one_cost_scaling_and_constraints():
-    """The paper's presets differ only in their switches (the terminal cost is on wherever
-    there is rear steer) and, for the front-steer baseline, its own tuned scaling (its own
+    """The paper's presets differ only in their switches (the terminal cost is on in every
+    one) and, for the front-steer baseline, its own tuned scaling (its own
     tuning group, as lqr_ff); lqr_ff (another law) shares every key but its own tuned Bryson
     maxima, the MPC cost it does not have and its delay predictor (the steering lags without
     the tyre relaxation: its better margin)."""
@@ -76,10 +76,10 @@ def test_presets_share_one_cost_scaling_and_constraints():
     for name in shared:
         group = [c for c in mpc if c.use_rear_steer or name not in tuned]
         assert len({getattr(c, name) for c in group}) == 1, name
-    # beyond the paper: every preset that can take the LQR terminal cost does (front steer
-    # alone cannot: MpcConfig refuses it)
+    # beyond the paper: every preset takes the LQR terminal cost (front steer alone, its
+    # velocity form carries Y's level only: terminal_cost.levelled_outputs)
     for c in mpc:
-        assert c.terminal_cost == ("lqr" if c.use_rear_steer else "none"), c.controller
+        assert c.terminal_cost == "lqr", c.controller
     # the hard β and r bounds wherever there is rear steer; the front-steer baseline has
     # none, as lqr_ff (deviation 20: they capped a front-steer car below the friction limit)
     for c in mpc:

@@ -71,6 +71,7 @@ from fourws_mpc.core.qp_solver import (
     QpStatus,
 )
 from fourws_mpc.core.terminal_cost import (
+    OUTPUTS,
     lateral_rows,
     output_index,
     output_positions,
@@ -158,7 +159,7 @@ def prediction_matrices(Aa: np.ndarray, Ba: np.ndarray, C: np.ndarray, n_p: int,
 
 
 def terminal_rows(Aa: np.ndarray, Ba: np.ndarray, n_p: int, n_c: int,
-                  powers: np.ndarray | None = None, n_levels: int = 2
+                  powers: np.ndarray | None = None, n_levels: int = len(OUTPUTS)
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Zx, Zu, Zd) with z_Np + z_ref = Zx ξ + Zu ΔU + Zd d̃: the velocity-form state of
     ``terminal_cost`` at the horizon's end (the lateral rows of ξ_Np − ξ_{Np−1}, then φ and
