@@ -3,7 +3,8 @@
 numba caches a compiled function beside its source (``__pycache__``, ``cache=True``): the
 source tree (unit tests) and the colcon install (nodes, ``fourws``) each have their own copy.
 ``make setup`` runs this once with each on the path; a short closed loop of each kind of
-preset (MPC with the terminal cost, MPC without it, LQR) reaches every kernel with the types
+preset (MPC with the terminal cost on both levels and on Y's alone, MPC without it, as the
+paper's cost and the fallback when the DARE fails, LQR) reaches every kernel with the types
 the runs use. Usage: ``python tools/warm_jit.py``.
 """
 
@@ -15,16 +16,18 @@ import fourws_common  # noqa: F401 - first: the BLAS thread default
 from fourws_bringup.core.closed_loop import run_closed_loop
 from fourws_bringup.core.conditions import load_condition
 
-#: (scenario, controller): every prediction model and cost term the presets use
-RUNS = (("dlc_60_mu05", "improved"), ("dlc_60_mu05", "mpc_fws"), ("mu_step", "lqr_ff"))
+#: (scenario, controller, MPC overrides): every prediction model and cost term the presets use
+RUNS = (("dlc_60_mu05", "improved", {}), ("dlc_60_mu05", "mpc_fws", {}),
+        ("dlc_60_mu05", "mpc_4ws", {"terminal_cost": "none"}), ("mu_step", "lqr_ff", {}))
 
 
 def main() -> int:
     t0 = time.perf_counter()
     realistic = load_condition("realistic", 0)
-    for scenario, controller in RUNS:
-        run_closed_loop(scenario, controller, max_steps=3)
-        run_closed_loop(scenario, controller, max_steps=3, condition=realistic)
+    for scenario, controller, overrides in RUNS:
+        run_closed_loop(scenario, controller, max_steps=3, mpc_overrides=overrides)
+        run_closed_loop(scenario, controller, max_steps=3, mpc_overrides=overrides,
+                        condition=realistic)
     import fourws_sim
 
     print(f"[setup] numba kernels ready for {fourws_sim.__file__.rsplit('/', 2)[0]} "

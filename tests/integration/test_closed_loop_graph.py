@@ -2,10 +2,10 @@
 
 One module-scoped set of lockstep runs of the paper's 60 km/h, μ = 0.5 lane change
 (mpc_fws, mpc_4ws, improved) is shared by the tests below:
-- every preset completes; the presets with rear steer hold the path closer than mpc_fws, with
-  the same cost, and within a third of its sideslip (the rear axle steers the sideslip away),
-  and improved stays under the paper's 0.089 m (the in-process tests measure the same on the
-  lead-out);
+- every preset completes; the presets with rear steer hold the path closer than mpc_fws (the
+  same cost structure on its own scaling) and within a third of its sideslip (the rear axle
+  steers the sideslip away), and improved stays under the paper's 0.089 m (the in-process
+  tests measure the same on the lead-out);
 - the graph is the in-process closed loop (``fourws_bringup.core.closed_loop``) distributed
   over processes: recorded states and commands equal the in-process ones to 1e-9;
 - replaying the recorded /vehicle/state and /reference/trajectory into a fresh mpc_node in

@@ -40,14 +40,15 @@ def _lead_out_rms(log, x_end: float, window_s: float = 5.0) -> np.ndarray:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", sorted(BENCH))
-def test_ideal_world_rear_steer_tracks_far_better_and_the_lead_out_decays(scenario):
+def test_ideal_world_rear_steer_tracks_better_with_less_sideslip_and_the_lead_out_decays(scenario):
     """The paper's setting (truth in, no delay): every preset runs the manoeuvre and 15 s of
     lead-out without abort; the presets with
     rear steer hold the path closer than the front-steer controllers and within a third of
     their sideslip (the rear axle steers the sideslip away; front steer alone must yaw the
-    car into the lane: with the same cost and terminal cost, `mpc_fws` holds 2.6 mm against
-    `mpc_4ws`'s 1.7 at 60 km/h) and within the paper's 0.089 m; on the lead-out (15 s of it)
-    the yaw rate dies out: its last 5 s RMS is below 1 % of the first 5 s RMS."""
+    car into the lane: with the same cost structure on its own scaling, `mpc_fws` holds
+    2.6 mm against `mpc_4ws`'s 1.7 at 60 km/h) and within the paper's 0.089 m; on the
+    lead-out (15 s of it) the yaw rate dies out: its last 5 s RMS is below 1 % of the first
+    5 s RMS."""
     path, x_end = BENCH[scenario]
     logs = {c: run_closed_loop(str(path), c, IDEAL_STEPS) for c in PRESETS}
     m = {c: log.metrics() for c, log in logs.items()}

@@ -136,10 +136,13 @@ def test_terminal_rows_are_the_velocity_form_state_of_a_simulated_plan(n_p, n_c,
                                rtol=1e-9, atol=1e-12)
 
 
-def test_a_car_on_a_turning_reference_owes_no_terminal_cost_for_its_heading_and_offset():
+@pytest.mark.parametrize("n_levels", [2, 1])
+def test_a_car_on_a_turning_reference_owes_no_terminal_cost_for_its_heading_and_offset(
+        n_levels):
     """The reference's own motion is the target of Δφ and ΔY: a plan whose φ and Y are the
     reference's (here the reference is the car's own free prediction through a turn) leaves
-    the e rows and the Δφ, ΔY rows of the terminal error at zero."""
+    the e rows and the Δφ, ΔY rows of the terminal error at zero; with Y's level alone (front
+    steer) its e row holds Y_ref's level, not φ_ref's."""
     cfg = MpcConfig()
     zeta, Ak, Bk, dk = _straight_model(cfg)
     zeta[StateIdx.R] = 0.15                  # turning at 0.15 rad/s
@@ -152,20 +155,25 @@ def test_a_car_on_a_turning_reference_owes_no_terminal_cost_for_its_heading_and_
         xs.append(Aa @ xs[-1] + da)
     ref = np.array([[x[StateIdx.PHI], x[StateIdx.Y]] for x in xs[1:]])
     assert abs(ref[-1, 0] - ref[-2, 0]) > 1e-3       # the reference turns
-    Zx, _, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c)
-    z = Zx @ xi + Zd @ da - T.reference_rows(ref, Ak.shape[0])
+    Zx, _, Zd = Q.terminal_rows(Aa, Ba, n_p, n_c, n_levels=n_levels)
+    z_ref = T.reference_rows(ref, Ak.shape[0], n_levels)
+    z = Zx @ xi + Zd @ da - z_ref
     rows = list(T.lateral_rows(Ak.shape[0]))
-    on_path = [rows.index(StateIdx.PHI), rows.index(StateIdx.Y), len(rows), len(rows) + 1]
+    on_path = [rows.index(StateIdx.PHI), rows.index(StateIdx.Y),
+               *range(len(rows), len(rows) + n_levels)]
     np.testing.assert_allclose(z[on_path], 0.0, atol=1e-12)
+    np.testing.assert_array_equal(z_ref[len(rows):], ref[-1, 2 - n_levels:])
 
 
-def test_the_reference_enters_with_its_sign():
+@pytest.mark.parametrize("enabled", [(True, True, True), (True, False, False)])
+def test_the_reference_enters_with_its_sign(enabled):
     """A car 1 cm left of a reference at Y = 0 and a car at Y = 0 beside a reference 1 cm
-    right of it make the same first move."""
+    right of it make the same first move, with both levels in the terminal cost and with Y's
+    alone (front steer)."""
     cfg = MpcConfig()
     zeta, Ak, Bk, dk = _straight_model(cfg)
     q_eff, r_eff = _weights(cfg)
-    en = np.ones(3, bool)
+    en = np.array(enabled)
     W = T.terminal_weight(Ak, Bk, en, q_eff, r_eff)
     qp = Q.MpcQp()
     moves = []
@@ -294,11 +302,14 @@ def test_the_terminal_cost_keeps_a_soft_short_horizon_stable():
     assert with_t < 0.995 and math.isfinite(with_t)
 
 
-def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch):
-    """A run with a steady straight (the bench's 30 s lead-out): the controller reuses its
-    terminal weight on some steps, and every weight it used equals a DARE solved afresh on
-    that step's data to 1e-9 relative."""
+@pytest.mark.parametrize("controller", ["improved", "mpc_fws"])
+def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch, controller):
+    """A run with a steady straight (the bench's 30 s lead-out): the controller has its
+    terminal weight on every step (front steer alone too: none is skipped), reuses it on some
+    steps, and every weight it used equals a DARE solved afresh on that step's data to 1e-9
+    relative."""
     from fourws_bringup.core.closed_loop import run_closed_loop
+    from fourws_mpc.core.controller import TERMINAL_COST_SKIPPED
 
     used = []
     call = T.TerminalWeight.__call__
@@ -310,9 +321,10 @@ def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch):
         return W
 
     monkeypatch.setattr(T.TerminalWeight, "__call__", record)
-    run_closed_loop(str(ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml"), "improved",
-                    max_steps=2500)
+    log = run_closed_loop(str(ROOT / "benchmarks/scenarios/bench_dlc_60_mu05.yaml"),
+                          controller, max_steps=2500)
     monkeypatch.undo()
+    assert not [st for st in log.solver_status if TERMINAL_COST_SKIPPED in st]
     reuses = used[-1][-1]
     assert len(used) == 2500 and reuses > 100, f"{reuses} reuses in {len(used)} steps"
     worst = max(np.max(np.abs(W - T.terminal_weight(Ak, Bk, en, q, r))) / np.max(np.abs(W))

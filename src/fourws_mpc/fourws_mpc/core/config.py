@@ -60,7 +60,8 @@ class MpcConfig:
     # beyond the paper (docs/mpc.md, "A terminal cost")
     terminal_cost: str = param(
         "none", "cost after the horizon: none (the paper's eq. 16) or lqr (the velocity-form "
-        "LQR cost-to-go of the same stage weights, terminal_cost.py)", choices=("none", "lqr"))
+        "LQR cost-to-go of the same stage weights; with front steer alone of Y's level only, "
+        "terminal_cost.py)", choices=("none", "lqr"))
     # fuzzy maxima, eq. (23)
     q_y_max: float = param(8000.0, "fuzzy maximum Q_Y,max", lo=0.0, hi=1e9)
     q_phi_max: float = param(5000.0, "fuzzy maximum Q_φ,max", lo=0.0, hi=1e9)

@@ -33,7 +33,8 @@ u(k+i) = u(k−1) + Σ_{j≤min(i, Nc−1)} Δu_j (the plan held after N_c, as t
     J += Σ_{i=0..Np−1} ‖u(k+i)‖²_S
 
 and a terminal cost (``terminal_cost``; docs/mpc.md, "A terminal cost"), the infinite-horizon
-LQR's cost-to-go in velocity form, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref; Y − Y_ref].
+LQR's cost-to-go in velocity form, z_Npᵀ W z_Np with z = [Δx_L; φ − φ_ref; Y − Y_ref]
+(z = [Δx_L; Y − Y_ref] with front steer alone).
 
 The QP variable is z = [ΔŨ; ε] with ΔŨ = D⁻¹ ΔU, D = diag(Δu_max) repeated Nc times, so every
 increment is in [−1, 1]; ε ≥ 0 is one dimensionless slack. Constraints, eq. (20) and section
@@ -309,6 +310,9 @@ def _terminal(terminal_w: np.ndarray | None, ref: np.ndarray, n: int
     if terminal_w is None:
         return _NO_TERMINAL, _ZERO_U, output_index(n)
     n_levels = terminal_w.shape[0] - len(lateral_rows(n))
+    if not 1 <= n_levels <= len(OUTPUTS):
+        raise ValueError(f"terminal weight of size {terminal_w.shape[0]}: a model of {n} states "
+                         f"takes {len(lateral_rows(n)) + 1} or {len(lateral_rows(n)) + 2}")
     return terminal_w, reference_rows(ref, n, n_levels), output_index(n, n_levels)
 
 
