@@ -36,7 +36,13 @@ def levelled_outputs(n_inputs: int) -> tuple[int, ...]:
     or more, Y alone with one (module docstring); always the last of :data:`OUTPUTS`."""
     if n_inputs < 1:
         raise ValueError("terminal cost: no input enabled")
-    return OUTPUTS if n_inputs >= len(OUTPUTS) else OUTPUTS[-1:]
+    return OUTPUTS if n_inputs >= len(OUTPUTS) else OUTPUTS[levels(1)]
+
+
+def levels(n_levels: int) -> slice:
+    """Where the levelled outputs sit in anything ordered as :data:`OUTPUTS` (their weights,
+    their reference columns): the last ``n_levels``."""
+    return slice(len(OUTPUTS) - n_levels, len(OUTPUTS))
 
 
 @lru_cache(maxsize=8)
@@ -53,7 +59,7 @@ def output_positions(n_state: int, n_levels: int = len(OUTPUTS)) -> tuple[int, .
     """Where the last ``n_levels`` outputs of ``OUTPUTS`` (φ, Y; or Y alone) sit among
     :func:`lateral_rows`."""
     rows = list(lateral_rows(n_state))
-    return tuple(rows.index(o) for o in OUTPUTS[len(OUTPUTS) - n_levels:])
+    return tuple(rows.index(o) for o in OUTPUTS[levels(n_levels)])
 
 
 @njit(cache=True)
@@ -157,7 +163,7 @@ class TerminalWeight:
         rows, cols, out = _indices(Ak.shape[0], enabled)
         f = np.ascontiguousarray
         q = np.asarray(q_eff, dtype=float)
-        data = (f(Ak, dtype=float), f(Bk, dtype=float), f(q[q.shape[0] - out.shape[0]:]),
+        data = (f(Ak, dtype=float), f(Bk, dtype=float), f(q[levels(out.shape[0])]),
                 f(np.asarray(r_eff, dtype=float)[cols]))
         last = self._last
         if (last is not None and last[0] is cols and last[1].shape == data[0].shape
@@ -287,7 +293,7 @@ def reference_rows(ref: np.ndarray, n_state: int, n_levels: int = len(OUTPUTS)
     z = np.zeros(n_l + n_levels)
     prev = ref[-2] if len(ref) >= 2 else np.zeros(len(OUTPUTS))
     z[list(output_positions(n_state))] = ref[-1] - prev
-    z[n_l:] = ref[-1][len(OUTPUTS) - n_levels:]
+    z[n_l:] = ref[-1][levels(n_levels)]
     return z
 
 
