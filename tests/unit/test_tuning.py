@@ -3,6 +3,7 @@ reproduces the shipped presets."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fourws_bringup import tuning
@@ -17,9 +18,11 @@ def test_the_spec_is_disjoint_from_what_is_reported():
     from fourws_bringup.sweep import load_spec
 
     spec = tuning.load_tuning_spec(SPEC)
-    bench = load_spec(ROOT / "benchmarks" / "robustness.yaml")
+    bench = load_spec(ROOT / "benchmarks" / "robustness.yaml") + \
+        load_spec(ROOT / "benchmarks" / "limits.yaml")
     reported = {Path(j.scenario).stem for j in bench} | {"dlc_60_mu05", "dlc_90_mu06"}
-    assert not {Path(s).stem for s in spec.scenarios} & reported
+    assert spec.grip_scenarios
+    assert not {Path(s).stem for s in spec.scenarios + spec.grip_scenarios} & reported
     assert not set(spec.seeds) & {j.condition.seed for j in bench}
     members = [c for g in spec.groups for c in g.controllers]
     from fourws_bringup.core.configs import list_controllers
@@ -36,9 +39,18 @@ def test_candidates_start_from_the_package_defaults_on_one_grid_for_every_group(
         assert base in tuning.candidates(spec, g)             # exponent 0 is the default
 
 
-def _fake_search(monkeypatch, table, radius=None):
-    """tune() on a 3 x 3 grid whose runs return ``table[grid index][run]`` (inf: an abort)
-    and whose candidates have ρ ``radius[grid index]`` (default 0.5)."""
+def test_the_grip_scenarios_reach_beyond_the_limit():
+    """Step 3's scenarios demand more than the road's grip (their printed demand in μg)."""
+    from fourws_sim.core.scenario import load_scenario
+
+    for path in tuning.load_tuning_spec(SPEC).grip_scenarios:
+        assert 1.05 < load_scenario(path).demand_ratio < 1.15, path
+
+
+def _fake_search(monkeypatch, table, radius=None, spins=()):
+    """tune() on a 3 x 3 grid whose runs return ``table[grid index][run]`` (inf: an abort),
+    whose candidates have ρ ``radius[grid index]`` (default 0.5) and whose grip run spins
+    for the grid indices in ``spins``."""
     import dataclasses
     import math
 
@@ -51,11 +63,13 @@ def _fake_search(monkeypatch, table, radius=None):
     monkeypatch.setattr(tuning, "_radius_job",
                         lambda a: (radius or [0.5] * 9)[int(a[2]["p"])])
     monkeypatch.setattr(tuning, "shipped", lambda _g: {"p": 4.0, "q": 0.0})
-    monkeypatch.setattr(tuning, "_jobs", lambda _s, _g, c: [(int(c["p"]), r)
-                                                            for r in range(len(table[0]))])
+    monkeypatch.setattr(tuning, "_jobs", lambda _s, _g, c, grip=False: (
+        [("grip", int(c["p"]))] if grip else [(int(c["p"]), r) for r in range(len(table[0]))]))
     ran = []
 
     def run_job(job):
+        if job[0] == "grip":
+            return {"controller": "c", "completed": True, "spin": job[1] in spins}
         ran.append(job)
         v = table[job[0]][job[1]]
         return {"controller": "c", "completed": math.isfinite(v),
@@ -65,12 +79,12 @@ def _fake_search(monkeypatch, table, radius=None):
     return spec, ran
 
 
-def _brute_force(table, radius=None):
-    """The grid index step 4 chooses, from every run of every candidate."""
+def _brute_force(table, radius=None, spins=()):
+    """The grid index step 5 chooses, from every run of every candidate."""
     import math
 
     radius = radius or [0.5] * 9
-    kept = [g for g in range(9) if radius[g] <= 0.98]
+    kept = [g for g in range(9) if radius[g] <= 0.98 and g not in spins]
     score = {g: max(table[g]) for g in kept}
     ok = [g for g in kept if math.isfinite(score[g])
           and all(math.isfinite(score[h]) for h in tuning.neighbours(g, 3) if h in score)]
@@ -78,7 +92,7 @@ def _brute_force(table, radius=None):
 
 
 def test_the_choice_sits_next_to_no_abort_and_equals_a_full_evaluation(monkeypatch):
-    """Step 4: the best candidate (4) sits next to one (5) that aborts only in a run pruning
+    """Step 5: the best candidate (4) sits next to one (5) that aborts only in a run pruning
     skipped; the choice moves to the best whose kept neighbours complete, which is what
     a full evaluation of every run chooses, and the report marks the one set aside."""
     inf = float("inf")
@@ -95,7 +109,7 @@ def test_the_choice_sits_next_to_no_abort_and_equals_a_full_evaluation(monkeypat
 
 def test_when_every_finished_candidate_is_set_aside_the_pruned_ones_are_finished(monkeypatch):
     """The best (4) sits next to two aborts (5, 7) that pruning had not run to the end, and
-    every other candidate was pruned after one run: step 4 finishes them rather than give
+    every other candidate was pruned after one run: step 5 finishes them rather than give
     up, and takes the one whose kept neighbours complete (0: its neighbours 1 and 3 fail
     the margin and do not count)."""
     inf = float("inf")
@@ -109,21 +123,40 @@ def test_when_every_finished_candidate_is_set_aside_the_pruned_ones_are_finished
     assert [r["p"] for r in report if r["set_aside"]] == [2.0, 4.0, 6.0, 8.0]
 
 
+def test_a_candidate_that_spins_beyond_the_limit_is_not_kept(monkeypatch):
+    """Step 3: the best tracker (4) spins on a grip run; it is never run on the tracking
+    scenarios, does not count as anyone's neighbour, and the report says who spun. When
+    every candidate spins the group is an error naming the grip runs."""
+    inf = float("inf")
+    table = [[0.05, 0.05], [0.06, 0.06], [0.07, 0.07],
+             [0.06, 0.06], [0.01, 0.01], [0.5, 0.5],
+             [0.08, 0.08], [0.09, inf], [0.02, 0.02]]
+    spec, ran = _fake_search(monkeypatch, table, spins={4})
+    chosen, report = tuning.tune(spec, progress=False)
+    assert chosen["g"]["p"] == 0.0 == float(_brute_force(table, spins={4}))
+    assert not [job for job in ran if job[0] == 4]
+    assert [(r["p"], r["grip"]) for r in report if r["grip"] != "pass"] == [(4.0, "spins: c")]
+    assert [r["p"] for r in report] == [float(g) for g in range(9)]     # grid order
+    spec, _ = _fake_search(monkeypatch, table, spins=set(range(9)))
+    with pytest.raises(ValueError, match="grip"):
+        tuning.tune(spec, progress=False)
+
+
 @pytest.mark.parametrize("seed", range(20))
 def test_the_pruned_search_chooses_what_a_full_evaluation_chooses(monkeypatch, seed):
-    """Random tables with aborts and margin-rejected candidates: exact pruning plus step 4
-    choose the brute-force choice, or both find no candidate."""
-    import numpy as np
-
+    """Random tables with aborts, margin-rejected candidates and candidates that spin
+    beyond the limit: exact pruning plus step 5 choose the brute-force choice, or both find
+    no candidate."""
     rng = np.random.default_rng(seed)
     table = rng.uniform(0.01, 0.1, (9, 3))
     table[rng.random((9, 3)) < 0.1] = np.inf
     radius = list(np.where(rng.random(9) < 0.15, 0.99, 0.5))
-    spec, _ = _fake_search(monkeypatch, table.tolist(), radius)
+    spins = set(np.flatnonzero(rng.random(9) < 0.15).tolist())
+    spec, _ = _fake_search(monkeypatch, table.tolist(), radius, spins)
     try:
-        want = _brute_force(table.tolist(), radius)
+        want = _brute_force(table.tolist(), radius, spins)
     except ValueError:                                     # min() of nothing
-        with pytest.raises(ValueError, match="aborts"):
+        with pytest.raises(ValueError, match="aborts|grip"):
             tuning.tune(spec, progress=False)
         return
     chosen, _ = tuning.tune(spec, progress=False)
@@ -144,6 +177,13 @@ def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
                                                             "speeds_kmh: []"), encoding="utf-8")
     with pytest.raises(ValueError, match="speeds_kmh"):   # no loop: no candidate is checked
         tuning.load_tuning_spec(bad)
+    text = SPEC.read_text(encoding="utf-8")
+    grip = text[text.index("grip:\n"):text.index("groups:")]
+    for wrong in (grip.replace("conditions: [all]", "conditions: [nosuch]"),
+                  grip.replace("  conditions: [all]\n", "")):
+        bad.write_text(text.replace(grip, wrong), encoding="utf-8")
+        with pytest.raises(ValueError, match="grip"):
+            tuning.load_tuning_spec(bad)
 
 
 def test_the_tuned_block_is_inserted_once_and_replaced_in_place():
@@ -172,7 +212,7 @@ def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
     (tmp_path / "tuning.yaml").write_text(text, encoding="utf-8")
     spec = tuning.load_tuning_spec(tmp_path / "tuning.yaml")
     assert spec.groups[0].controllers == (str(tmp_path / "mine.yaml"),)
-    values = {"scale_y_m": 0.0236, "scale_phi_deg": 0.6}
+    values = {"scale_y_m": 0.0118, "scale_phi_deg": 0.3}
     elsewhere = tmp_path / "package"
     elsewhere.mkdir()
     assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == \
@@ -180,7 +220,7 @@ def test_a_preset_the_spec_gives_as_a_file_is_written_in_that_file(tmp_path):
     assert tuning.write_presets(spec, {"mine": values}, elsewhere) == \
         [str(tmp_path / "mine.yaml")]
     cfg = load_mpc_config(str(tmp_path / "mine.yaml"))
-    assert (cfg.scale_y_m, cfg.scale_phi_deg, cfg.np_baseline) == (0.0236, 0.6, 30)
+    assert (cfg.scale_y_m, cfg.scale_phi_deg, cfg.np_baseline) == (0.0118, 0.3, 30)
     assert not list(elsewhere.iterdir())
     assert tuning.write_presets(spec, {"mine": values}, elsewhere, check=True) == []
 

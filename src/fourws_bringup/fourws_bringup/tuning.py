@@ -11,13 +11,18 @@ the same for every group of controllers (the spec's ``groups``):
    ``max_spectral_radius`` (``core.margins``) at every speed of ``margin.speeds_kmh`` in every
    condition of ``margin.conditions`` (its delay and dead time told to the controller). A
    group with no kept candidate is an error, not a silent default.
-3. **Closed loop.** Every kept candidate runs every controller of the group on every tuning
+3. **Grip.** A kept candidate is kept only if every controller of the group, on every
+   ``grip`` scenario (beyond the limit of grip) under every ``grip`` condition and seed,
+   neither spins (``core.limit_metrics``: |β| ≥ ``SPIN_SIDESLIP_DEG``) nor aborts: stability
+   beyond the limit is a constraint, as the margin is, not a score. A group with no candidate
+   left is an error.
+4. **Closed loop.** Every kept candidate runs every controller of the group on every tuning
    scenario under every tuning condition and seed (the in-process loop of ``fourws sweep``).
    A controller's score is its worst max |e_Y| (on the truth) over those runs, infinite if one
    aborts; the candidate's is the worst over the group's controllers. Exact pruning
    (:func:`tune`): a candidate already worse than the best complete one is abandoned; the
    choice is a full evaluation's.
-4. **Choice.** The lowest score among the candidates whose kept grid neighbours (one step
+5. **Choice.** The lowest score among the candidates whose kept grid neighbours (one step
    in i or j, :func:`neighbours`) complete every run: the choice sits on a plateau, not on
    the edge of a cliff that one noise draw did not show. Ties go to the lower worst ρ, then to
    the grid order. The chosen values are written into each preset of the group between the
@@ -58,7 +63,7 @@ BEGIN = ("# -- tuned: fourws tune (its spec names this preset) writes the lines 
          "do not edit --")
 END = "# -- end tuned --"
 SPEC_KEYS = {"grid_exponents", "max_spectral_radius", "margin", "scenarios", "seeds",
-             "conditions", "groups"}
+             "conditions", "grip", "groups"}
 #: digits kept in the written values (a rerun compares equal)
 DIGITS = 4
 
@@ -85,6 +90,8 @@ class TuningSpec:
     seeds: tuple[int, ...]
     conditions: Mapping[str, Mapping[str, Any]]
     groups: tuple[Group, ...]
+    grip_scenarios: tuple[str, ...] = ()
+    grip_conditions: tuple[str, ...] = ()        # names among ``conditions``
 
 
 def load_tuning_spec(path: str | Path) -> TuningSpec:
@@ -112,12 +119,21 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
         groups.append(Group(str(name), tuple(beside(path, c) for c in g["controllers"]),
                             params))
     scen = tuple(beside(path, s) for s in d["scenarios"])
+    grip = d["grip"] or {}
+    grip_conditions = tuple(str(c) for c in grip.get("conditions", ()))
+    if set(grip) - {"scenarios", "conditions"} or \
+            bool(grip.get("scenarios")) != bool(grip_conditions) or \
+            not set(grip_conditions) <= set(d["conditions"]):
+        raise ValueError(f"{path}: grip is a mapping of scenarios and conditions (names "
+                         f"among conditions: {sorted(d['conditions'])}), both or neither")
     return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
                       float(d["max_spectral_radius"]),
                       tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]),
                       margin_conditions,
                       scen, tuple(int(s) for s in d["seeds"]), dict(d["conditions"]),
-                      tuple(groups))
+                      tuple(groups),
+                      tuple(beside(path, s) for s in grip.get("scenarios", ())),
+                      grip_conditions)
 
 
 def defaults(group: Group) -> dict[str, float]:
@@ -174,22 +190,40 @@ def _radius_job(args: tuple[TuningSpec, Group, dict[str, float]]) -> float:
     return worst_radius(*args)
 
 
-def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float]) -> list[Any]:
-    """A candidate's runs, controller by controller in the group's order (the first
-    controller is the one expected to score worst: the pruning of :func:`tune` then
-    stops a losing candidate early)."""
+def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float], grip: bool = False
+          ) -> list[Any]:
+    """A candidate's runs of step 4 (``grip``: of step 3), controller by controller in the
+    group's order (the first controller is the one expected to score worst: the pruning of
+    :func:`tune` then stops a losing candidate early)."""
     from .sweep import Job
 
     jobs = []
     for c in group.controllers:
         for name, raw in spec.conditions.items():
+            if grip and name not in spec.grip_conditions:
+                continue
             for seed in spec.seeds:
                 cond = condition_from_mapping({**condition_mapping(raw), "name": str(name)},
                                               seed=seed)
                 cond = dataclasses.replace(cond, mpc_overrides={**cond.mpc_overrides, **cand})
-                for s in spec.scenarios:
+                for s in (spec.grip_scenarios if grip else spec.scenarios):
                     jobs.append(Job(c, s, cond))
     return jobs
+
+
+def _grip_failures(spec: TuningSpec, group: Group, kept: Sequence[tuple[int, Any, float]],
+                   pool: Any) -> dict[int, list[str]]:
+    """Step 3: per grid index of ``kept``, the controllers that spin or abort on a grip run
+    (none: the candidate passes)."""
+    from .sweep import run_job
+
+    work = [(g, j) for g, c, _ in kept for j in _jobs(spec, group, c, grip=True)]
+    failed: dict[int, list[str]] = {}
+    for (g, _), row in zip(work, pool.map(run_job, [j for _, j in work]), strict=True):
+        label = preset_label(row["controller"])
+        if (not row.get("completed") or row.get("spin")) and label not in failed.get(g, []):
+            failed.setdefault(g, []).append(label)
+    return failed
 
 
 def shipped(group: Group) -> dict[str, float]:
@@ -214,19 +248,19 @@ def neighbours(index: int, n: int) -> list[int]:
 
 def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
-    """(chosen values per group, one report row per kept candidate): steps 1-4.
+    """(chosen values per group, one report row per kept candidate): steps 1-5.
 
-    Step 3 is evaluated with exact pruning: a candidate is abandoned as soon as one of its runs
+    Step 4 is evaluated with exact pruning: a candidate is abandoned as soon as one of its runs
     is worse than the best complete candidate's score (its own score, a maximum, can then only
     be worse). The candidate the presets hold now (:func:`shipped`) runs first and alone,
     ``workers`` of its runs at a time; then the next run of each of ``workers`` candidates at
     once, in grid order, so a losing candidate costs one run, not a batch. A good first bar
     prunes the rest sooner, and since pruning is strict and the
     choice compares (score, ρ, grid index), the order changes the time, never the choice,
-    which is the one a full evaluation makes. Step 4 finishes the runs it needs: those of the
+    which is the one a full evaluation makes. Step 5 finishes the runs it needs: those of the
     best candidate's kept grid neighbours, and of any pruned candidate whose lower bound could
     beat the next best once the best is set aside. The report, in grid order, gives a pruned
-    candidate's lower bound and marks the candidates step 4 set aside for an aborting
+    candidate's lower bound and marks the candidates step 5 set aside for an aborting
     neighbour."""
     from concurrent.futures import Executor, ProcessPoolExecutor
 
@@ -246,7 +280,7 @@ def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
 
 def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress: bool
                 ) -> tuple[dict[str, float], list[dict[str, Any]]]:
-    """One group's steps 1-4 (:func:`tune`): its chosen values and report rows."""
+    """One group's steps 1-5 (:func:`tune`): its chosen values and report rows."""
     from .sweep import run_job
 
     n = len(spec.grid_exponents)
@@ -262,6 +296,18 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
         raise ValueError(f"group {group.name}: no candidate of the grid has a "
                          f"spectral radius <= {spec.max_spectral_radius}; widen "
                          "grid_exponents")
+    spins = _grip_failures(spec, group, kept, pool) if spec.grip_scenarios else {}
+    for g, c, r in kept:
+        if g in spins:
+            report.append({"group": group.name, **c, "worst_rho": round(r, 5), "runs": 0,
+                           "grip": "spins: " + " ".join(spins[g])})
+    kept = [(g, c, r) for g, c, r in kept if g not in spins]
+    if progress and spec.grip_scenarios:
+        print(f"[tune] {group.name}: {len(kept)} of them neither spin nor abort beyond the "
+              "limit (grip)", file=sys.stderr)
+    if not kept:
+        raise ValueError(f"group {group.name}: every candidate with a spectral radius <= "
+                         f"{spec.max_spectral_radius} spins or aborts on a grip run")
     best: tuple[float, float, int] | None = None
     now = shipped(group)
     order = sorted(range(len(kept)), key=lambda k: kept[k][1] != now)
@@ -286,7 +332,9 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
         if progress:
             print(f"[tune] {group.name} {dict(kept[k][1])}: rho {kept[k][2]:.4f}, "
                   + (f"score {score(k):.4f} m" if complete(k) else
-                     f"pruned after {done[k]} runs (> {best[0]:.4f} m)"),
+                     f"pruned after {done[k]} runs ("
+                     + ("a run aborts)" if math.isinf(score(k)) else
+                        f"> {best[0]:.4f} m)")),
                   file=sys.stderr)
 
     pending = list(order)
@@ -301,14 +349,15 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
             work = [(k, jobs[k][done[k]]) for k in pending[:batch]]
         run(work)
         for k in dict.fromkeys(k for k, _ in work):
-            if not complete(k) and (best is None or score(k) <= best[0]):
+            if not complete(k) and math.isfinite(score(k)) and (best is None
+                                                                or score(k) <= best[0]):
                 continue                  # exact pruning: a maximum only grows
             pending.remove(k)
             say(k)
             if complete(k) and (best is None or (score(k), kept[k][2], k) < best):
                 best = (score(k), kept[k][2], k)
 
-    # step 4: the best candidate whose kept grid neighbours all complete
+    # step 5: the best candidate whose kept grid neighbours all complete
     at = {g: k for k, (g, _, _) in enumerate(kept)}
     set_aside: set[int] = set()
     while True:
@@ -337,11 +386,14 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
     for k in sorted(order):
         c, r = kept[k][1], kept[k][2]
         report.append({"group": group.name, **c, "worst_rho": round(r, 5),
+                       "grip": "pass" if spec.grip_scenarios else None,
                        "runs": done[k], "score_m": score(k) if complete(k) else None,
                        "pruned_above_m": None if complete(k) else score(k),
                        "set_aside": "yes" if k in set_aside else None,
                        **{f"max_ey_{preset_label(m)}": v
                           for m, v in by_ctrl[k].items()}})
+    grid = {tuple(c.values()): g for g, c in enumerate(cands)}
+    report.sort(key=lambda row: grid[tuple(row[p] for p in group.parameters)])
     return kept[best[2]][1], report
 
 
