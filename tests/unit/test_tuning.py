@@ -68,8 +68,9 @@ def _fake_search(monkeypatch, table, radius=None, spins=()):
     ran = []
 
     def run_job(job):
-        if job[0] == "grip":
-            return {"controller": "c", "completed": True, "spin": job[1] in spins}
+        if job[0] == "grip":                 # spins: a set of indices, or index -> row
+            return (spins[job[1]] if isinstance(spins, dict) and job[1] in spins else
+                    {"controller": "c", "completed": True, "spin": job[1] in spins})
         ran.append(job)
         v = table[job[0]][job[1]]
         return {"controller": "c", "completed": math.isfinite(v),
@@ -124,22 +125,49 @@ def test_when_every_finished_candidate_is_set_aside_the_pruned_ones_are_finished
 
 
 def test_a_candidate_that_spins_beyond_the_limit_is_not_kept(monkeypatch):
-    """Step 3: the best tracker (4) spins on a grip run; it is never run on the tracking
-    scenarios, does not count as anyone's neighbour, and the report says who spun. When
-    every candidate spins the group is an error naming the grip runs."""
+    """Step 3: the best tracker (4) spins on its grip run; it never runs the tracking
+    scenarios, and although one of them would abort it does not count as its neighbours'
+    neighbour: 5 is chosen, which step 5 would set aside if 4 counted. The report says who
+    failed and why (a spin, an abort, a run that raised). When every candidate fails the
+    group is an error naming the grip runs."""
     inf = float("inf")
     table = [[0.05, 0.05], [0.06, 0.06], [0.07, 0.07],
-             [0.06, 0.06], [0.01, 0.01], [0.5, 0.5],
-             [0.08, 0.08], [0.09, inf], [0.02, 0.02]]
-    spec, ran = _fake_search(monkeypatch, table, spins={4})
+             [0.06, 0.06], [0.01, inf], [0.015, 0.015],
+             [0.08, 0.08], [0.09, 0.09], [0.02, 0.02]]
+    failing = {4: {"controller": "c", "completed": False, "spin": True},
+               6: {"controller": "c", "completed": False, "spin": False, "reason": "road"},
+               7: {"controller": "c", "completed": False, "reason": "raised ValueError: x"}}
+    assert _brute_force(table) != 5                        # without step 3, 4 would count
+    spec, ran = _fake_search(monkeypatch, table, spins=failing)
     chosen, report = tuning.tune(spec, progress=False)
-    assert chosen["g"]["p"] == 0.0 == float(_brute_force(table, spins={4}))
-    assert not [job for job in ran if job[0] == 4]
-    assert [(r["p"], r["grip"]) for r in report if r["grip"] != "pass"] == [(4.0, "spins: c")]
+    assert chosen["g"]["p"] == 5.0 == float(_brute_force(table, spins=set(failing)))
+    assert not [job for job in ran if job[0] in failing]
+    assert {r["p"]: r["grip"] for r in report if r["grip"] != "pass"} == {
+        4.0: "fails: c (spins)", 6.0: "fails: c (aborts)", 7.0: "fails: c (raises)"}
     assert [r["p"] for r in report] == [float(g) for g in range(9)]     # grid order
+    assert all(list(r)[:5] == ["group", "p", "q", "worst_rho", "grip"] for r in report)
     spec, _ = _fake_search(monkeypatch, table, spins=set(range(9)))
     with pytest.raises(ValueError, match="grip"):
         tuning.tune(spec, progress=False)
+
+
+def test_the_grip_runs_are_the_grip_scenarios_under_the_grip_conditions_and_seeds():
+    """Step 3's jobs: every controller of the group on every grip scenario, only under the
+    grip conditions, every seed, with the candidate's values; a spec without ``grip`` (the
+    studies' older specs) has no step 3."""
+    spec = tuning.load_tuning_spec(SPEC)
+    group = spec.groups[0]
+    cand = tuning.candidates(spec, group)[5]
+    jobs = tuning._jobs(spec, group, cand, grip=True)
+    assert len(jobs) == (len(group.controllers) * len(spec.grip_conditions)
+                         * len(spec.seeds) * len(spec.grip_scenarios))
+    assert {j.scenario for j in jobs} == set(spec.grip_scenarios)
+    assert {j.condition.name for j in jobs} == set(spec.grip_conditions)
+    assert {j.controller for j in jobs} == set(group.controllers)
+    assert all(j.condition.mpc_overrides.items() >= cand.items() for j in jobs)
+    assert not {j.scenario for j in tuning._jobs(spec, group, cand)} & set(spec.grip_scenarios)
+    old = tuning.load_tuning_spec(ROOT / "studies" / "horizon" / "tuning.yaml")
+    assert old.grip_scenarios == () == old.grip_conditions
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -169,10 +197,11 @@ def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
                    encoding="utf-8")
     with pytest.raises(ValueError, match="seeds"):
         tuning.load_tuning_spec(bad)
-    bad.write_text(SPEC.read_text(encoding="utf-8").replace(
-        "[scale_y_m, scale_phi_deg]", "[scale_y_m, no_such_parameter]"), encoding="utf-8")
-    with pytest.raises(ValueError, match="no_such_parameter"):
-        tuning.load_tuning_spec(bad)
+    for params in ("[scale_y_m, no_such_parameter]", "[scale_y_m, scale_y_m]"):
+        bad.write_text(SPEC.read_text(encoding="utf-8").replace(
+            "[scale_y_m, scale_phi_deg]", params), encoding="utf-8")
+        with pytest.raises(ValueError, match=params.split(", ")[1].rstrip("]")):
+            tuning.load_tuning_spec(bad)
     bad.write_text(SPEC.read_text(encoding="utf-8").replace("speeds_kmh: [60.0, 90.0]",
                                                             "speeds_kmh: []"), encoding="utf-8")
     with pytest.raises(ValueError, match="speeds_kmh"):   # no loop: no candidate is checked
@@ -180,7 +209,10 @@ def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
     text = SPEC.read_text(encoding="utf-8")
     grip = text[text.index("grip:\n"):text.index("groups:")]
     for wrong in (grip.replace("conditions: [all]", "conditions: [nosuch]"),
-                  grip.replace("  conditions: [all]\n", "")):
+                  grip.replace("  conditions: [all]\n", ""),
+                  grip.replace("  conditions: [all]\n", "  conditions: [all]\n  seeds: [1]\n"),
+                  grip.replace("conditions: [all]", "conditions: all"),
+                  "grip: [scenarios]\n"):
         bad.write_text(text.replace(grip, wrong), encoding="utf-8")
         with pytest.raises(ValueError, match="grip"):
             tuning.load_tuning_spec(bad)
@@ -242,7 +274,7 @@ def test_the_presets_carry_the_chosen_values_and_satisfy_the_margin(spec_path):
 
 
 #: the group CI reruns whole, through every step of the procedure (the cheapest runs: about
-#: 20 s of the MPC groups' 1-5 min); ``make tune-check`` reruns every group
+#: 10 s of the MPC groups' 1-3 min); ``make tune-check`` reruns every group
 RERUN_GROUP = "lqr_ff"
 
 

@@ -20,8 +20,8 @@ the same for every group of controllers (the spec's ``groups``):
    scenario under every tuning condition and seed (the in-process loop of ``fourws sweep``).
    A controller's score is its worst max |e_Y| (on the truth) over those runs, infinite if one
    aborts; the candidate's is the worst over the group's controllers. Exact pruning
-   (:func:`tune`): a candidate already worse than the best complete one is abandoned; the
-   choice is a full evaluation's.
+   (:func:`tune`): a candidate already worse than the best complete one, or with a run that
+   aborts, is abandoned; the choice is a full evaluation's.
 5. **Choice.** The lowest score among the candidates whose kept grid neighbours (one step
    in i or j, :func:`neighbours`) complete every run: the choice sits on a plateau, not on
    the edge of a cliff that one noise draw did not show. Ties go to the lower worst ρ, then to
@@ -63,7 +63,9 @@ BEGIN = ("# -- tuned: fourws tune (its spec names this preset) writes the lines 
          "do not edit --")
 END = "# -- end tuned --"
 SPEC_KEYS = {"grid_exponents", "max_spectral_radius", "margin", "scenarios", "seeds",
-             "conditions", "grip", "groups"}
+             "conditions", "groups"}
+#: optional keys (``grip`` absent: no step 3, as the specs of the studies before it)
+OPTIONAL_KEYS = {"grip"}
 #: digits kept in the written values (a rerun compares equal)
 DIGITS = 4
 
@@ -102,7 +104,8 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     d = read_yaml_file(path)
     if not isinstance(d, Mapping):
         raise ValueError(f"{path}: a tuning spec is a mapping of {sorted(SPEC_KEYS)}")
-    missing, unknown = sorted(SPEC_KEYS - set(d)), sorted(set(d) - SPEC_KEYS)
+    missing = sorted(SPEC_KEYS - set(d))
+    unknown = sorted(set(d) - SPEC_KEYS - OPTIONAL_KEYS)
     if missing or unknown:
         raise ValueError(f"{path}: missing {missing}, unknown {unknown}")
     m = d["margin"]
@@ -114,18 +117,21 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     groups = []
     for name, g in d["groups"].items():
         params = tuple(str(p) for p in g["parameters"])
-        if len(params) != 2 or not set(params) <= known:
+        if len(set(params)) != 2 or not set(params) <= known:
             raise ValueError(f"{path}: group {name}: two MPC parameters, got {list(params)}")
         groups.append(Group(str(name), tuple(beside(path, c) for c in g["controllers"]),
                             params))
     scen = tuple(beside(path, s) for s in d["scenarios"])
-    grip = d["grip"] or {}
-    grip_conditions = tuple(str(c) for c in grip.get("conditions", ()))
-    if set(grip) - {"scenarios", "conditions"} or \
+    grip = d.get("grip") or {}
+    lists = isinstance(grip, Mapping) and all(
+        isinstance(grip.get(k, []), list) for k in ("scenarios", "conditions"))
+    grip_conditions = tuple(str(c) for c in grip.get("conditions", ())) if lists else ()
+    if not lists or set(grip) - {"scenarios", "conditions"} or \
             bool(grip.get("scenarios")) != bool(grip_conditions) or \
-            not set(grip_conditions) <= set(d["conditions"]):
-        raise ValueError(f"{path}: grip is a mapping of scenarios and conditions (names "
-                         f"among conditions: {sorted(d['conditions'])}), both or neither")
+            not set(grip_conditions) <= {str(k) for k in d["conditions"]}:
+        raise ValueError(f"{path}: grip is a mapping of two lists, scenarios and conditions "
+                         f"(names among conditions: {sorted(map(str, d['conditions']))}), "
+                         "both or neither")
     return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
                       float(d["max_spectral_radius"]),
                       tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]),
@@ -200,7 +206,7 @@ def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float], grip: bool 
     jobs = []
     for c in group.controllers:
         for name, raw in spec.conditions.items():
-            if grip and name not in spec.grip_conditions:
+            if grip and str(name) not in spec.grip_conditions:
                 continue
             for seed in spec.seeds:
                 cond = condition_from_mapping({**condition_mapping(raw), "name": str(name)},
@@ -213,16 +219,24 @@ def _jobs(spec: TuningSpec, group: Group, cand: Mapping[str, float], grip: bool 
 
 def _grip_failures(spec: TuningSpec, group: Group, kept: Sequence[tuple[int, Any, float]],
                    pool: Any) -> dict[int, list[str]]:
-    """Step 3: per grid index of ``kept``, the controllers that spin or abort on a grip run
-    (none: the candidate passes)."""
+    """Step 3: per grid index of ``kept``, the controllers that fail a grip run, each with
+    why: ``spins`` (|β| ≥ 10°, whether or not the run then aborts), ``aborts`` (the run
+    ended early otherwise) or ``raises`` (the run failed: its error is printed)."""
     from .sweep import run_job
 
     work = [(g, j) for g, c, _ in kept for j in _jobs(spec, group, c, grip=True)]
     failed: dict[int, list[str]] = {}
     for (g, _), row in zip(work, pool.map(run_job, [j for _, j in work]), strict=True):
-        label = preset_label(row["controller"])
-        if (not row.get("completed") or row.get("spin")) and label not in failed.get(g, []):
-            failed.setdefault(g, []).append(label)
+        if row.get("completed") and not row.get("spin"):
+            continue
+        raised = str(row.get("reason", "")).startswith("raised")
+        why = "spins" if row.get("spin") else "raises" if raised else "aborts"
+        if raised:
+            print(f"[tune] {group.name}: a grip run {row['reason']}\n"
+                  f"{row.get('traceback', '')}", file=sys.stderr)
+        entry = f"{preset_label(row['controller'])} ({why})"
+        if entry not in failed.get(g, []):
+            failed.setdefault(g, []).append(entry)
     return failed
 
 
@@ -248,7 +262,7 @@ def neighbours(index: int, n: int) -> list[int]:
 
 def tune(spec: TuningSpec, workers: int = 1, progress: bool = True
          ) -> tuple[dict[str, dict[str, float]], list[dict[str, Any]]]:
-    """(chosen values per group, one report row per kept candidate): steps 1-5.
+    """(chosen values per group, one report row per candidate step 2 kept): steps 1-5.
 
     Step 4 is evaluated with exact pruning: a candidate is abandoned as soon as one of its runs
     is worse than the best complete candidate's score (its own score, a maximum, can then only
@@ -299,8 +313,8 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
     spins = _grip_failures(spec, group, kept, pool) if spec.grip_scenarios else {}
     for g, c, r in kept:
         if g in spins:
-            report.append({"group": group.name, **c, "worst_rho": round(r, 5), "runs": 0,
-                           "grip": "spins: " + " ".join(spins[g])})
+            report.append({"group": group.name, **c, "worst_rho": round(r, 5),
+                           "grip": "fails: " + ", ".join(spins[g]), "runs": 0})
     kept = [(g, c, r) for g, c, r in kept if g not in spins]
     if progress and spec.grip_scenarios:
         print(f"[tune] {group.name}: {len(kept)} of them neither spin nor abort beyond the "
@@ -386,7 +400,7 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
     for k in sorted(order):
         c, r = kept[k][1], kept[k][2]
         report.append({"group": group.name, **c, "worst_rho": round(r, 5),
-                       "grip": "pass" if spec.grip_scenarios else None,
+                       **({"grip": "pass"} if spec.grip_scenarios else {}),
                        "runs": done[k], "score_m": score(k) if complete(k) else None,
                        "pruned_above_m": None if complete(k) else score(k),
                        "set_aside": "yes" if k in set_aside else None,
@@ -445,7 +459,8 @@ def replace_block(text: str, lines: list[str], where: Any = "preset") -> str:
 
 def report_markdown(spec_path: str, chosen: Mapping[str, Mapping[str, float]],
                     report: list[dict[str, Any]]) -> str:
-    """Per group: the choice, then every kept candidate's worst ρ and scores (m)."""
+    """Per group: the choice, then every candidate step 2 kept: its worst ρ, whether it
+    passed step 3 (grip) and its scores (m)."""
     out = [f"# Tuning ({Path(spec_path).name})", ""]
     for g, vals in chosen.items():
         out += [f"## {g}: " + ", ".join(f"{k} = {v:g}" for k, v in vals.items()), ""]
