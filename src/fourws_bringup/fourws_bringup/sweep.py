@@ -151,9 +151,18 @@ def run_job(job: Job) -> dict[str, Any]:
                 (None, None)
     except Exception as exc:  # noqa: BLE001 - a failed run is a row, never a lost run
         row["completed"] = False
-        row["reason"] = f"raised {type(exc).__name__}: {exc}"
+        row["reason"] = f"{RAISED} {type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+#: how :func:`run_job` begins the reason of a run that raised
+RAISED = "raised"
+
+
+def raised(row: Mapping[str, Any]) -> bool:
+    """Whether :func:`run_job`'s row is a run that raised (not one that ended early)."""
+    return str(row.get("reason", "")).startswith(RAISED)
 
 
 def _allocator_geometry(job: Job) -> tuple[float, float]:
@@ -337,7 +346,7 @@ def sweep_cli(spec: str, out: str, workers: int, scheduler: str | None = None,
     (out_dir / "summary.md").write_text(
         f"# Sweep of {Path(spec).name}: {len(rows)} runs\n\n" + summary_markdown(rows, jobs),
         encoding="utf-8")
-    failed = sum(1 for r in rows if str(r.get("reason", "")).startswith("raised"))
+    failed = sum(1 for r in rows if raised(r))
     print(f"{len(rows)} runs, {failed} raised; {out_dir / 'results.csv'}, "
           f"{out_dir / 'summary.md'}")
     return 0

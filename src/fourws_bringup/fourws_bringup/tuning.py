@@ -222,16 +222,15 @@ def _grip_failures(spec: TuningSpec, group: Group, kept: Sequence[tuple[int, Any
     """Step 3: per grid index of ``kept``, the controllers that fail a grip run, each with
     why: ``spins`` (|β| ≥ 10°, whether or not the run then aborts), ``aborts`` (the run
     ended early otherwise) or ``raises`` (the run failed: its error is printed)."""
-    from .sweep import run_job
+    from .sweep import raised, run_job
 
     work = [(g, j) for g, c, _ in kept for j in _jobs(spec, group, c, grip=True)]
     failed: dict[int, list[str]] = {}
     for (g, _), row in zip(work, pool.map(run_job, [j for _, j in work]), strict=True):
         if row.get("completed") and not row.get("spin"):
             continue
-        raised = str(row.get("reason", "")).startswith("raised")
-        why = "spins" if row.get("spin") else "raises" if raised else "aborts"
-        if raised:
+        why = "spins" if row.get("spin") else "raises" if raised(row) else "aborts"
+        if raised(row):
             print(f"[tune] {group.name}: a grip run {row['reason']}\n"
                   f"{row.get('traceback', '')}", file=sys.stderr)
         entry = f"{preset_label(row['controller'])} ({why})"
@@ -310,12 +309,12 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
         raise ValueError(f"group {group.name}: no candidate of the grid has a "
                          f"spectral radius <= {spec.max_spectral_radius}; widen "
                          "grid_exponents")
-    spins = _grip_failures(spec, group, kept, pool) if spec.grip_scenarios else {}
+    failed = _grip_failures(spec, group, kept, pool) if spec.grip_scenarios else {}
     for g, c, r in kept:
-        if g in spins:
+        if g in failed:
             report.append({"group": group.name, **c, "worst_rho": round(r, 5),
-                           "grip": "fails: " + ", ".join(spins[g]), "runs": 0})
-    kept = [(g, c, r) for g, c, r in kept if g not in spins]
+                           "grip": "fails: " + ", ".join(failed[g]), "runs": 0})
+    kept = [(g, c, r) for g, c, r in kept if g not in failed]
     if progress and spec.grip_scenarios:
         print(f"[tune] {group.name}: {len(kept)} of them neither spin nor abort beyond the "
               "limit (grip)", file=sys.stderr)
