@@ -273,7 +273,9 @@ def page(rows: list[dict], figs: list[str]) -> str:
         text += [f"### {sc}", L.case_table(by_case, sc, ALLOC, alloc_keys)]
     text += [
         "## What the adaptive parts did (improved, realistic_friction)",
+        "### DLC μ 0.5",
         L.adaptive_table(by_case, "improved", "realistic_friction", "ladder_dlc_60_mu05_"),
+        "### DLC μ 0.9",
         L.adaptive_table(by_case, "improved", "realistic_friction", "ladder_dlc_60_mu09_"),
         "## Figures",
         *(f"![{f}](limits/{f})" for f in figs),
