@@ -271,12 +271,12 @@ def page(rows: list[dict], figs: list[str]) -> str:
     for sc in ("split_mu_braking_80_20", "ladder_dlc_60_mu05_110", "ladder_dlc_60_mu05_130",
                "iso3888_2_40_mu09"):
         text += [f"### {sc}", L.case_table(by_case, sc, ALLOC, alloc_keys)]
+    text += ["## What the adaptive parts did (improved, realistic_friction)"]
+    for name, prefix in L.LADDERS.items():
+        if prefix.startswith("ladder_"):                     # the lane-change ladders
+            text += [f"### {name}", L.adaptive_table(by_case, "improved",
+                                                     "realistic_friction", prefix)]
     text += [
-        "## What the adaptive parts did (improved, realistic_friction)",
-        "### DLC μ 0.5",
-        L.adaptive_table(by_case, "improved", "realistic_friction", "ladder_dlc_60_mu05_"),
-        "### DLC μ 0.9",
-        L.adaptive_table(by_case, "improved", "realistic_friction", "ladder_dlc_60_mu09_"),
         "## Figures",
         *(f"![{f}](limits/{f})" for f in figs),
         "",

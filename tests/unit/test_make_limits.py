@@ -19,5 +19,8 @@ def test_the_page_is_built_from_a_few_rows_with_its_rules_and_tables(monkeypatch
         assert f"* {rule}" in text
     assert "## Headline: highest rung or speed passed clean" in text
     assert "| improved | ideal_shipped |" in text and "| lqr_ff | ideal_shipped |" in text
+    adaptive = text.split("## What the adaptive parts did")[1].split("## Figures")[0]
+    assert [ln for ln in adaptive.splitlines() if ln.startswith("### ")] == [
+        "### DLC μ 0.5", "### DLC μ 0.9"]          # one table per lane-change ladder, named
     assert "![phase_plane.png](limits/phase_plane.png)" in text
     assert "## Runs that raised" not in text
