@@ -257,7 +257,7 @@ def page(rows: list[dict], figs: list[str]) -> str:
         "",
         "## The front-steer baseline against the textbook LQR",
         "mpc_fws runs without the hard β and yaw-rate bounds (its preset says why: a "
-        "front-steer car cannot hold β and r apart, and the bounds capped its lateral "
+        "front-steer car cannot hold β and r apart, and the bounds cap its lateral "
         "acceleration below the friction limit), as lqr_ff; every preset with rear steer "
         "keeps them. Cases where lqr_ff stays clean and mpc_fws does not:",
         "",
