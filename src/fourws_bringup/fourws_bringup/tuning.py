@@ -229,8 +229,9 @@ def _grip_failures(spec: TuningSpec, group: Group, kept: Sequence[tuple[int, Any
     for (g, _), row in zip(work, pool.map(run_job, [j for _, j in work]), strict=True):
         if row.get("completed") and not row.get("spin"):
             continue
-        why = "spins" if row.get("spin") else "raises" if raised(row) else "aborts"
-        if raised(row):
+        error = raised(row)
+        why = "spins" if row.get("spin") else "raises" if error else "aborts"
+        if error:
             print(f"[tune] {group.name}: a grip run {row['reason']}\n"
                   f"{row.get('traceback', '')}", file=sys.stderr)
         entry = f"{preset_label(row['controller'])} ({why})"
