@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from fourws_common.load_transfer import LoadGeometry, wheel_loads
 from fourws_mpc.core import friction_model as FM
 from fourws_mpc.core import relaxation_model as RM
 from fourws_mpc.core.axle_tyre import force
@@ -24,7 +25,7 @@ from fourws_mpc.core.grip import (
 )
 from fourws_mpc.core.model import InputIdx, ModelParams, StateIdx
 from fourws_mpc.core.reference import Reference
-from fourws_sim.core.tyre import peak_argument
+from fourws_sim.core.tyre import cornering_stiffness, peak_argument
 from fourws_sim.core.vehicle_params import load_vehicle_params
 
 P = ModelParams()
@@ -125,20 +126,48 @@ def test_a_yaw_moment_costs_lateral_grip_by_the_friction_ellipse():
     assert r1 / r0 == pytest.approx(eps, rel=1e-6)
 
 
-def _estimator(**kw):
-    return GripEstimator(P, GripSettings(**kw))
+def _car_params(**kw):
+    """The MPC's model of the paper's car, from its car file (what the nodes get)."""
+    v = load_vehicle_params()
+    c_f, c_r = v.static_cornering_stiffness()
+    values = dict(mass_kg=v.mass_kg, a_m=v.cg_to_front_axle_m, b_m=v.cg_to_rear_axle_m,
+                  c_cf=c_f, c_cr=c_r, track_width_m=v.track_width_front_m,
+                  cg_height_m=v.cg_height_m,
+                  roll_stiffness_front_share=v.roll_stiffness_front_share,
+                  tyre_stiffness_peak_load_n=(v.tyre_cornering_load_factor
+                                              * v.tyre_nominal_load_n))
+    return ModelParams(**{**values, **kw})
+
+
+P_CAR = _car_params()
+
+
+def _estimator(params=P_CAR, **kw):
+    return GripEstimator(params, GripSettings(**kw))
 
 
 def _cornering_state(mu, share, sign=1.0):
-    """ζ_t and a_y of cornering with both axles at ``share`` of their peak slip on a road of
-    μ (a_y from the two axles' Magic Formula forces)."""
-    fz_f, fz_r = FM.axle_loads(P)
-    a_f, a_r = (share * a for a in peak_slips(P, mu))
-    force_sum = _mf(a_f, 2 * P.c_cf, mu * fz_f) + _mf(a_r, 2 * P.c_cr, mu * fz_r)
+    """ζ_t and a_y of steady cornering with both axles at ``share`` of their static peak slip
+    on a road of μ: a_y is the fixed point of the plant's four tyres (its K_α(F_z) law,
+    ``tyre.cornering_stiffness``, and the Magic Formula, written here) at the quasi-static
+    loads of that a_y (``load_transfer``, checked against the plant's steady loads in
+    test_alloc_tyre_estimate)."""
+    v = load_vehicle_params()
+    g = LoadGeometry(v.mass_kg, v.cg_to_front_axle_m, v.cg_to_rear_axle_m, v.cg_height_m,
+                     v.track_width_front_m, v.track_width_rear_m,
+                     v.roll_stiffness_front_share, v.gravity_mps2)
+    a_f, a_r = (share * a for a in peak_slips(P_CAR, mu))
+    tyres = (v.tyre("front"), v.tyre("front"), v.tyre("rear"), v.tyre("rear"))
+    ay = 0.0
+    for _ in range(200):
+        loads = wheel_loads(0.0, ay, g)
+        total = sum(_mf(alpha, float(cornering_stiffness(fz, t)), mu * fz)
+                    for alpha, fz, t in zip((a_f, a_f, a_r, a_r), loads, tyres, strict=True))
+        ay = total / v.mass_kg
     z = np.zeros(FM.N_STATE_FRICTION)
     z[StateIdx.VX] = V
     z[R_.ALPHA_F], z[R_.ALPHA_R] = sign * a_f, sign * a_r
-    return z, sign * force_sum / P.mass_kg
+    return z, sign * ay
 
 
 def test_mu_comes_from_the_state_when_it_carries_one():
@@ -179,6 +208,37 @@ def test_tyres_at_half_their_peak_say_nothing_and_noise_makes_no_evidence():
     z, ay = _cornering_state(0.9, 0.3)
     assert e.evidence(z, 0.0, ay, 0.0, 1.0) is None
     assert e.evidence(z, 0.0, -ay, 0.0, 1.0) is None
+
+
+@pytest.mark.parametrize("mu,static_reads_below", [(0.5, 0.97), (0.9, 0.92)])
+def test_the_road_reads_right_only_with_the_load_transfer(mu, static_reads_below):
+    """At 0.6 of the peak slip on the plant's tyres the estimate is the road's μ; without the
+    load transfer (h = 0: static loads) the outer tyre's smaller stiffness gain reads as
+    saturation, and the same forces give a road too low: 3 % on μ 0.5 (0.46 g), 9 % on μ 0.9
+    (0.79 g)."""
+    z, ay = _cornering_state(mu, 0.6)
+    assert _estimator().evidence(z, 0.0, ay, 0.0, mu) == pytest.approx(mu, rel=1e-6)
+    static = _estimator(_car_params(cg_height_m=0.0)).evidence(z, 0.0, ay, 0.0, mu)
+    assert static < static_reads_below * mu
+
+
+def test_a_deficit_at_a_small_ask_is_no_evidence_but_a_low_road_still_shows():
+    """On a straight the slip observer's error can put both axles at +0.5° while a_y reads
+    0.3 m/s² (a realistic run): the linear tyres then exceed m a_y by the margin, but they ask
+    for 0.14 of the grip the prior 0.8 allows, below ``evidence_min_ask`` (0.3), so it is no
+    evidence (without the rule it is, at μ 0.04). A road of 0.15 at its peak slip asks for
+    about 2.41 × 0.15 = 0.36 of the prior 1.0 and still shows."""
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = 8.3
+    z[R_.ALPHA_F] = z[R_.ALPHA_R] = math.radians(0.5)
+    ask = (2 * (P_CAR.c_cf + P_CAR.c_cr) * math.radians(0.5)
+           / (0.8 * P_CAR.mass_kg * P_CAR.gravity_mps2))
+    assert 0.1 < ask < 0.3
+    assert _estimator(prior=0.8, evidence_min_ask=0.0).evidence(z, 0.0, 0.3, 0.0, 0.8) < 0.1
+    assert _estimator(prior=0.8).evidence(z, 0.0, 0.3, 0.0, 0.8) is None
+    z, ay = _cornering_state(0.15, 1.0)
+    assert _estimator(prior=1.0).evidence(z, 0.0, ay, 0.0, 1.0) == pytest.approx(0.15,
+                                                                               rel=0.01)
 
 
 def test_without_evidence_it_returns_to_the_prior_and_never_below_the_grip_in_use():

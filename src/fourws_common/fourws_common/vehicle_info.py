@@ -50,6 +50,10 @@ class VehicleInfo:
     tyre_shape_lateral: float = _spec("Magic Formula C_y", lo=1.01, hi=1.99, unit="1")
     tyre_curvature_lateral: float = _spec("Magic Formula E_y", lo=-10.0, hi=0.99,
                                           unit="1")
+    tyre_nominal_load_n: float = _spec("tyre nominal load F_z0", lo=100.0, hi=20000.0,
+                                       unit="N")
+    tyre_cornering_load_factor: float = _spec("p_Ky2: K_alpha peaks at F_z = p_Ky2 F_z0",
+                                              lo=0.2, hi=10.0, unit="1")
     cornering_stiffness_front_static_n_per_rad: float = _spec(
         "per-tyre cornering stiffness at static load, front (recorded)", lo=1000.0,
         hi=500000.0, unit="N/rad")
@@ -147,7 +151,8 @@ def load_vehicle_info(name_or_path: str | Path | None = None) -> VehicleInfo:
 
 def _mpc(v: VehicleInfo) -> dict[str, Any]:
     same = ("mass_kg", "yaw_inertia_kg_m2", "cg_to_front_axle_m", "cg_to_rear_axle_m",
-            "cornering_stiffness_front_static_n_per_rad",
+            "cg_height_m", "roll_stiffness_front_share", "tyre_nominal_load_n",
+            "tyre_cornering_load_factor", "cornering_stiffness_front_static_n_per_rad",
             "cornering_stiffness_rear_static_n_per_rad", "gravity_mps2", "tyre_shape_lateral",
             "tyre_curvature_lateral", "steer_front_time_constant_s",
             "steer_rear_time_constant_s", "max_steer_front_deg", "max_steer_rear_deg")

@@ -44,3 +44,12 @@ def force(alpha: float, k: float, d: float, c: float, e: float
     z = b * alpha
     g, dg = _g(z, c, e)
     return d * g, d * dg * b, g - z * dg
+
+
+def stiffness_at_load(k_static: float, fz_static: float, fz: float, peak_load: float
+                      ) -> float:
+    """A tyre's cornering stiffness (N/rad) at load ``fz`` (N), from its value ``k_static`` at
+    ``fz_static``: K(F_z) ∝ sin(2 atan(F_z/F_k)), F_k = p_Ky2 F_z0 the load where it peaks
+    (MF 5.2 load sensitivity, the plant's law; docs/plant.md, "Tyres")."""
+    law = math.sin(2.0 * math.atan(max(fz, 0.0) / peak_load))
+    return k_static * law / math.sin(2.0 * math.atan(fz_static / peak_load))

@@ -164,6 +164,17 @@ class MpcConfig:
                                       **field_range("tyre_shape_lateral"))
     tyre_curvature_lateral: float = param(-1.0, "Magic Formula curvature factor E of the "
                                           "axle tyre", **field_range("tyre_curvature_lateral"))
+    cg_height_m: float = param(0.54, "CG height h (the μ estimate's load transfer)",
+                               **field_range("cg_height_m"))
+    roll_stiffness_front_share: float = param(
+        0.55, "front share of the roll stiffness (the μ estimate's load transfer)",
+        **field_range("roll_stiffness_front_share"))
+    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0 (the μ estimate's "
+                                       "stiffness at a wheel's load)",
+                                       **field_range("tyre_nominal_load_n"))
+    tyre_cornering_load_factor: float = param(
+        2.0, "p_Ky2: the tyre's K_alpha peaks at F_z = p_Ky2 F_z0 (the μ estimate's stiffness "
+        "at a wheel's load)", **field_range("tyre_cornering_load_factor"))
     mu_floor: float = param(0.1, "μ estimate is clamped to at least this (and flagged)",
                             lo=0.01, hi=1.0)
     mu_ceiling: float = param(1.2, "μ estimate is clamped to at most this (and flagged)",
@@ -175,6 +186,10 @@ class MpcConfig:
         0.31, "evidence only under mostly lateral use, |a_x| <= this share of μ̂ g (the "
         "friction ellipse then takes at most 5 % of the lateral grip); else μ̂ holds "
         "(grip.py)", lo=0.0, hi=1.0)
+    mu_evidence_min_ask: float = param(
+        0.3, "evidence only while the linear tyres' force asks for at least this share of "
+        "the grip the prior mu_default allows (a deficit at a smaller ask is the slip "
+        "observer's error; grip.py)", lo=0.0, hi=1.0)
     envelope_softness: float = param(
         1e-3, "friction-aware: the β and r bounds are soft, the slack ε relaxing them by this "
         "share of the bound (ε priced by rho like the tracking band)", lo=1e-4, hi=10.0)
@@ -303,7 +318,10 @@ class MpcConfig:
             relaxation_length_rear_m=self.relaxation_length_rear_m,
             gravity_mps2=self.gravity_mps2, track_width_m=self.track_width_m,
             tyre_shape_lateral=self.tyre_shape_lateral,
-            tyre_curvature_lateral=self.tyre_curvature_lateral)
+            tyre_curvature_lateral=self.tyre_curvature_lateral,
+            cg_height_m=self.cg_height_m,
+            roll_stiffness_front_share=self.roll_stiffness_front_share,
+            tyre_stiffness_peak_load_n=self.tyre_cornering_load_factor * self.tyre_nominal_load_n)
 
     @property
     def du_max(self) -> np.ndarray:

@@ -4,13 +4,22 @@ Part of the friction-aware prediction (docs/mpc.md, "Friction-aware prediction")
 
 **Estimate.** When the state carries μ (the idealised world: the plant's truth) it is used.
 Otherwise μ̂ comes from the transient slips α̂' of the slip observer and a_y. The car's lateral
-force is m a_y; the axles' Magic Formula forces F_f(α̂'f; μ F_z,f ε) + F_r(α̂'r; μ F_z,r ε) grow
-with μ. When the linear tyres' sum K_f α̂'f + K_r α̂'r exceeds |m a_y| by at least
-``mu_evidence_deficit`` m g, the tyres have shown their peak and the μ that matches m a_y is
-the evidence (bisection). Evidence is taken only while |a_x| ≤ ``mu_evidence_max_ax`` μ̂ g
-(0.31: the friction ellipse then takes at most 5 % of the lateral grip, half the evidence
-margin); else μ̂ holds, since the split of the longitudinal forces between the wheels is not
-known. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
+force is m a_y; the four tyres' Magic Formula forces Σ_i F(α̂'_i; K_i, μ F_z,i ε), each wheel
+at its axle's α̂', grow with μ. The loads F_z,i are the quasi-static transfer of the measured
+a_x, a_y (``fourws_common.load_transfer``) and each K_i the tyre's stiffness at its load
+(:func:`axle_tyre.stiffness_at_load`): the outer wheel gains less stiffness than the inner
+one loses, so at 0.7 g an axle is 12 % softer than at static load, a deficit that static
+loads would take for the peak. When the linear tyres' sum Σ K_i α̂'_i exceeds |m a_y| by at
+least ``mu_evidence_deficit`` m g, the tyres have shown their peak and the μ that matches
+m a_y is the evidence (bisection). Evidence is taken only while |a_x| ≤
+``mu_evidence_max_ax`` μ̂ g (0.31: the friction ellipse then takes at most 5 % of the lateral
+grip, half the evidence margin); else μ̂ holds, since the split of the longitudinal forces
+between the wheels is not known. And only while the linear tyres ask for at least
+``mu_evidence_min_ask`` (0.3) of the grip the prior allows, |Σ K_i α̂'_i| ≥ 0.3 μ_prior m g:
+below half its peak a Magic Formula tyre is within 3 % of linear, so a deficit at a smaller
+ask is the slip observer's error (its lateral-velocity input), not the peak; a road down to
+0.12 μ_prior still shows at its peak slip, where the ask is u*·C μ m g = 2.41 μ m g
+(studies/grip_estimate). μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
 ``mu_rise_time_s``, and without evidence returns to the prior ``mu_default`` with
 ``mu_rise_time_s``. μ̂ is never below the grip in use, √(a_x² + a_y²)/g, and is clamped to
 [``mu_floor``, ``mu_ceiling``]; a clamp is flagged.
@@ -34,7 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fourws_mpc.core.axle_tyre import force
+from fourws_common.load_transfer import LoadGeometry, wheel_loads
+from fourws_mpc.core.axle_tyre import force, stiffness_at_load
 from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse
 from fourws_mpc.core.model import ModelParams
 from fourws_mpc.core.relaxation_model import RelaxIdx
@@ -55,6 +65,7 @@ class GripSettings:
     ceiling: float = 1.2
     evidence_deficit: float = 0.1
     evidence_max_ax: float = 0.31
+    evidence_min_ask: float = 0.3
     fall_time_s: float = 0.05
     rise_time_s: float = 1.0
 
@@ -79,15 +90,30 @@ def _pole(dt_s: float, tau_s: float) -> float:
     return 1.0 - math.exp(-dt_s / tau_s)
 
 
-def _axle_sum(zeta: np.ndarray, p: ModelParams, mu: float, eps: float) -> float:
-    """F_f + F_r (N) of the axles' Magic Formula at α̂' on a road of μ."""
-    total = 0.0
-    fz_f, fz_r = axle_loads(p)
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
-        total += force(float(alpha), 2.0 * c, mu * fz * eps, p.tyre_shape_lateral,
-                       p.tyre_curvature_lateral)[0]
-    return total
+def _geometry(p: ModelParams) -> LoadGeometry:
+    return LoadGeometry(p.mass_kg, p.a_m, p.b_m, p.cg_height_m, p.track_width_m,
+                        p.track_width_m, p.roll_stiffness_front_share, p.gravity_mps2)
+
+
+def _wheels(p: ModelParams, ax: float, ay: float) -> tuple[tuple[int, float, float], ...]:
+    """(axle slip index, K_i, F_z,i) of the four wheels at the quasi-static loads of a_x,
+    a_y (module docstring)."""
+    g = _geometry(p)
+    front, rear = g.static_loads()
+    fl, fr, rl, rr = wheel_loads(ax, ay, g)
+    k = p.tyre_stiffness_peak_load_n
+    return tuple((idx, stiffness_at_load(c, static, fz, k), fz)
+                 for idx, c, static, fz in ((RelaxIdx.ALPHA_F, p.c_cf, front, fl),
+                                            (RelaxIdx.ALPHA_F, p.c_cf, front, fr),
+                                            (RelaxIdx.ALPHA_R, p.c_cr, rear, rl),
+                                            (RelaxIdx.ALPHA_R, p.c_cr, rear, rr)))
+
+
+def _tyre_sum(zeta: np.ndarray, wheels: tuple[tuple[int, float, float], ...], p: ModelParams,
+              mu: float, eps: float) -> float:
+    """Σ_i F(α̂'_i; K_i, μ F_z,i ε) (N): the four tyres' Magic Formula forces on a road of μ."""
+    return sum(force(float(zeta[idx]), k, mu * fz * eps, p.tyre_shape_lateral,
+                     p.tyre_curvature_lateral)[0] for idx, k, fz in wheels if fz > 0.0)
 
 
 class GripEstimator:
@@ -106,21 +132,24 @@ class GripEstimator:
 
     def evidence(self, zeta: np.ndarray, ax: float, ay: float, mz: float, mu_now: float
                  ) -> float | None:
-        """The μ for which the axles' forces at α̂' sum to m a_y, when the linear tyres
-        exceed it by the margin (module docstring); else None."""
+        """The μ for which the tyres' forces at α̂' and the loads of a_x, a_y sum to m a_y,
+        when the linear tyres ask for at least ``evidence_min_ask`` of the grip the prior
+        allows and exceed m a_y by the margin (module docstring); else None."""
         p = self.p
         f = p.mass_kg * ay
-        linear = 2.0 * (p.c_cf * zeta[RelaxIdx.ALPHA_F] + p.c_cr * zeta[RelaxIdx.ALPHA_R])
-        if f * linear <= 0.0 or abs(linear) - abs(f) < (self.s.evidence_deficit * p.mass_kg
-                                                         * p.gravity_mps2):
+        weight = p.mass_kg * p.gravity_mps2
+        wheels = _wheels(p, ax, ay)
+        linear = sum(k * zeta[idx] for idx, k, _ in wheels)
+        if (f * linear <= 0.0 or abs(linear) < self.s.evidence_min_ask * self.s.prior * weight
+                or abs(linear) - abs(f) < self.s.evidence_deficit * weight):
             return None
         eps, _ = ellipse(mz, p, Grip(mu_now, ax))
         lo, hi = MU_SEARCH
-        if abs(_axle_sum(zeta, p, hi, eps)) < abs(f):
+        if abs(_tyre_sum(zeta, wheels, p, hi, eps)) < abs(f):
             return None                       # no road explains it: not evidence
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if abs(_axle_sum(zeta, p, mid, eps)) < abs(f):
+            if abs(_tyre_sum(zeta, wheels, p, mid, eps)) < abs(f):
                 lo = mid
             else:
                 hi = mid

@@ -76,8 +76,8 @@ class VehicleParams:
         0.5, "speed scale of the tanh that fades rolling resistance at standstill",
         lo=0.01, hi=5.0, unit="m/s",
     )
-    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0", lo=100.0, hi=20000.0,
-                                       unit="N")
+    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0",
+                                       **field_range("tyre_nominal_load_n"))
     tyre_cornering_coeff_front: float = param(
         17.73, "p_Ky1 of the front tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
     )
@@ -85,7 +85,7 @@ class VehicleParams:
         20.65, "p_Ky1 of the rear tyres (K_alpha scale)", lo=1.0, hi=100.0, unit="1"
     )
     tyre_cornering_load_factor: float = param(
-        2.0, "p_Ky2: K_alpha peaks at F_z = p_Ky2 F_z0", lo=0.2, hi=10.0, unit="1"
+        2.0, "p_Ky2: K_alpha peaks at F_z = p_Ky2 F_z0", **field_range("tyre_cornering_load_factor")
     )
     tyre_long_stiffness_per_load: float = param(
         17.0, "longitudinal slip stiffness over load c_kappa = K_kappa/F_z", lo=1.0, hi=60.0,

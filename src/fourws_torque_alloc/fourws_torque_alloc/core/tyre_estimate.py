@@ -4,15 +4,8 @@ The allocator's ``tyre_forces: estimated`` (docs/lower-layer.md, "Tyre data"). F
 measured accelerations a_x, a_y (IMU, m/s², ISO body frame) and the controller's own nominal
 vehicle constants (the plant's names, the car file):
 
-* **F_z**, static load plus quasi-static load transfer (a rigid body; the roll stiffness
-  splits the lateral transfer between the axles)::
-
-      F_z,front = m g b/(2L) − m h a_x/(2L),   F_z,rear = m g a/(2L) + m h a_x/(2L)
-      F_z,FL/FR = F_z,front ∓ χ_f m h a_y / B_f,   F_z,RL/RR = F_z,rear ∓ (1−χ_f) m h a_y / B_r
-
-  clipped at 0 (a wheel in the air). With χ_f the front roll-stiffness share this is the
-  plant's own transfer in steady state (its transient lags by the load-transfer time
-  constant), and the four loads sum to m g.
+* **F_z**, static load plus quasi-static load transfer
+  (:func:`fourws_common.load_transfer.wheel_loads`, shared with the MPC's μ estimate).
 * **F_y**, the single-track model in quasi-steady cornering (yaw moment balance, ṙ ≈ 0):
   F_y,front axle = m a_y b/L, F_y,rear axle = m a_y a/L, each axle's force shared by its two
   wheels in proportion to their estimated loads.
@@ -26,6 +19,8 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
+
+from fourws_common.load_transfer import LoadGeometry, wheel_loads
 
 
 @dataclass(frozen=True)
@@ -58,23 +53,16 @@ class TyreEstimator:
 
     def __init__(self, p: EstimatorParams) -> None:
         self.p = p
+        self._geometry = LoadGeometry(
+            p.mass_kg, p.cg_to_front_axle_m, p.cg_to_rear_axle_m, p.cg_height_m,
+            p.track_width_front_m, p.track_width_rear_m, p.roll_stiffness_front_share,
+            p.gravity_mps2)
         length = p.cg_to_front_axle_m + p.cg_to_rear_axle_m
-        w = p.mass_kg * p.gravity_mps2
-        self._fz0 = (0.5 * w * p.cg_to_rear_axle_m / length,
-                     0.5 * w * p.cg_to_front_axle_m / length)
-        self._k_long = 0.5 * p.mass_kg * p.cg_height_m / length
-        self._k_lat = (p.roll_stiffness_front_share * p.mass_kg * p.cg_height_m
-                       / p.track_width_front_m,
-                       (1.0 - p.roll_stiffness_front_share) * p.mass_kg * p.cg_height_m
-                       / p.track_width_rear_m)
         self._fy_share = (p.cg_to_rear_axle_m / length, p.cg_to_front_axle_m / length)
 
     def fz(self, ax: float, ay: float) -> np.ndarray:
         """Wheel loads (4,), N."""
-        dl = self._k_long * ax
-        f, r = self._fz0[0] - dl, self._fz0[1] + dl
-        df, dr = self._k_lat[0] * ay, self._k_lat[1] * ay
-        return np.maximum(np.array([f - df, f + df, r - dr, r + dr]), 0.0)
+        return np.array(wheel_loads(ax, ay, self._geometry))
 
     def estimate(self, ax: float, ay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(F_z (4,), F_y (4,), μ (4,))."""

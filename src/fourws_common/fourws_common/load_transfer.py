@@ -1,0 +1,48 @@
+"""Computes the quasi-static wheel loads of measured accelerations: the loads every controller
+assumes (the allocator's tyre estimate, the MPC's μ estimate; docs/lower-layer.md, "Tyre data").
+
+A rigid body; the roll stiffness splits the lateral transfer between the axles::
+
+    F_z,front = m g b/(2L) − m h a_x/(2L),   F_z,rear = m g a/(2L) + m h a_x/(2L)
+    F_z,FL/FR = F_z,front ∓ χ_f m h a_y / B_f,   F_z,RL/RR = F_z,rear ∓ (1−χ_f) m h a_y / B_r
+
+clipped at 0 (a wheel in the air), FL FR RL RR, a_x and a_y in the ISO body frame (m/s²).
+With χ_f the front roll-stiffness share this is the plant's own transfer in steady state (its
+transient lags by the load-transfer time constant), and the four loads sum to m g.
+Pure Python, no ROS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class LoadGeometry:
+    """The car's constants behind its loads (SI; names as in the car file)."""
+
+    mass_kg: float
+    cg_to_front_axle_m: float
+    cg_to_rear_axle_m: float
+    cg_height_m: float
+    track_width_front_m: float
+    track_width_rear_m: float
+    roll_stiffness_front_share: float
+    gravity_mps2: float
+
+    def static_loads(self) -> tuple[float, float]:
+        """Static load of one front and one rear wheel (N)."""
+        length = self.cg_to_front_axle_m + self.cg_to_rear_axle_m
+        w = self.mass_kg * self.gravity_mps2
+        return 0.5 * w * self.cg_to_rear_axle_m / length, 0.5 * w * self.cg_to_front_axle_m / length
+
+
+def wheel_loads(ax: float, ay: float, g: LoadGeometry) -> tuple[float, float, float, float]:
+    """(F_z,FL, F_z,FR, F_z,RL, F_z,RR), N, of the module docstring."""
+    front, rear = g.static_loads()
+    mh = g.mass_kg * g.cg_height_m
+    dl = 0.5 * mh * ax / (g.cg_to_front_axle_m + g.cg_to_rear_axle_m)
+    df = g.roll_stiffness_front_share * mh * ay / g.track_width_front_m
+    dr = (1.0 - g.roll_stiffness_front_share) * mh * ay / g.track_width_rear_m
+    f, r = front - dl, rear + dl
+    return max(f - df, 0.0), max(f + df, 0.0), max(r - dr, 0.0), max(r + dr, 0.0)
