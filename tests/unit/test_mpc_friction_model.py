@@ -10,7 +10,7 @@ import pytest
 from fourws_common.load_transfer import LoadGeometry, wheel_loads
 from fourws_mpc.core import friction_model as FM
 from fourws_mpc.core import relaxation_model as RM
-from fourws_mpc.core.axle_tyre import force
+from fourws_mpc.core.axle_tyre import force, stiffness_at_load
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.controller import MpcController, VehicleSample
 from fourws_mpc.core.grip import (
@@ -210,11 +210,24 @@ def test_tyres_at_half_their_peak_say_nothing_and_noise_makes_no_evidence():
     assert e.evidence(z, 0.0, -ay, 0.0, 1.0) is None
 
 
-@pytest.mark.parametrize("mu,static_reads_below", [(0.5, 0.97), (0.9, 0.92)])
+@pytest.mark.parametrize("fz", [0.0, 500.0, 1957.0, 3022.0, 6000.0])
+def test_a_tyres_stiffness_at_load_is_the_plants(fz):
+    """``stiffness_at_load`` from the static value and p_Ky2 F_z0 equals the plant tyre's
+    K_α(F_z) (``tyre.cornering_stiffness``, front and rear)."""
+    v = load_vehicle_params()
+    static = v.static_wheel_loads_n
+    peak = v.tyre_cornering_load_factor * v.tyre_nominal_load_n
+    for c, fz0, tyre in ((P_CAR.c_cf, static[0], v.tyre("front")),
+                         (P_CAR.c_cr, static[2], v.tyre("rear"))):
+        assert stiffness_at_load(c, fz0, fz, peak) == pytest.approx(
+            float(cornering_stiffness(fz, tyre)), rel=1e-9, abs=1e-9)
+
+
+@pytest.mark.parametrize("mu,static_reads_below", [(0.5, 0.975), (0.9, 0.92)])
 def test_the_road_reads_right_only_with_the_load_transfer(mu, static_reads_below):
     """At 0.6 of the peak slip on the plant's tyres the estimate is the road's μ; without the
     load transfer (h = 0: static loads) the outer tyre's smaller stiffness gain reads as
-    saturation, and the same forces give a road too low: 3 % on μ 0.5 (0.46 g), 9 % on μ 0.9
+    saturation, and the same forces give a road too low: 3.4 % on μ 0.5 (0.46 g), 9.5 % on μ 0.9
     (0.79 g)."""
     z, ay = _cornering_state(mu, 0.6)
     assert _estimator().evidence(z, 0.0, ay, 0.0, mu) == pytest.approx(mu, rel=1e-6)
@@ -225,8 +238,8 @@ def test_the_road_reads_right_only_with_the_load_transfer(mu, static_reads_below
 def test_a_deficit_at_a_small_ask_is_no_evidence_but_a_low_road_still_shows():
     """On a straight the slip observer's error can put both axles at +0.5° while a_y reads
     0.3 m/s² (a realistic run): the linear tyres then exceed m a_y by the margin, but they ask
-    for 0.14 of the grip the prior 0.8 allows, below ``evidence_min_ask`` (0.3), so it is no
-    evidence (without the rule it is, at μ 0.04). A road of 0.15 at its peak slip asks for
+    for 0.17 of the grip the prior 0.8 allows, below ``evidence_min_ask`` (0.3), so it is no
+    evidence (without the rule it is, at μ 0.03). A road of 0.15 at its peak slip asks for
     about 2.41 × 0.15 = 0.36 of the prior 1.0 and still shows."""
     z = np.zeros(FM.N_STATE_FRICTION)
     z[StateIdx.VX] = 8.3

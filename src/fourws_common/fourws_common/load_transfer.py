@@ -8,8 +8,8 @@ A rigid body; the roll stiffness splits the lateral transfer between the axles::
 
 clipped at 0 (a wheel in the air), FL FR RL RR, a_x and a_y in the ISO body frame (m/s²).
 With χ_f the front roll-stiffness share this is the plant's own transfer in steady state (its
-transient lags by the load-transfer time constant), and the four loads sum to m g.
-Pure Python, no ROS.
+transient lags by the load-transfer time constant), and while no wheel is clipped the four
+loads sum to m g. Pure Python, no ROS.
 """
 
 from __future__ import annotations

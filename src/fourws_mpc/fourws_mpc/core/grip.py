@@ -8,7 +8,7 @@ force is m a_y; the four tyres' Magic Formula forces Σ_i F(α̂'_i; K_i, μ F_z
 at its axle's α̂', grow with μ. The loads F_z,i are the quasi-static transfer of the measured
 a_x, a_y (``fourws_common.load_transfer``) and each K_i the tyre's stiffness at its load
 (:func:`axle_tyre.stiffness_at_load`): the outer wheel gains less stiffness than the inner
-one loses, so at 0.7 g an axle is 12 % softer than at static load, a deficit that static
+one loses, so at 0.63 g the front axle is 12 % softer than at static load, a deficit that static
 loads would take for the peak. When the linear tyres' sum Σ K_i α̂'_i exceeds |m a_y| by at
 least ``mu_evidence_deficit`` m g, the tyres have shown their peak and the μ that matches
 m a_y is the evidence (bisection). Evidence is taken only while |a_x| ≤
