@@ -73,10 +73,10 @@ def _point(rng, vx=V):
                         rng.uniform(-1500, 1500)])
 
 
-@pytest.mark.parametrize("mu,ax", [(0.5, 0.0), (0.9, 1.5), (0.3, -2.0)])
-def test_jacobians_equal_central_finite_differences(mu, ax):
+@pytest.mark.parametrize("mu,ax,ay", [(0.5, 0.0, 0.0), (0.9, 1.5, 6.5), (0.3, -2.0, -2.5)])
+def test_jacobians_equal_central_finite_differences(mu, ax, ay):
     rng = np.random.default_rng(11)
-    g = FM.Grip(mu, ax)
+    g = FM.Grip(mu, ax, ay)
     for _ in range(6):
         z, u = _point(rng)
         f, A, B = FM.jacobians(z, u, P, g)
@@ -106,6 +106,34 @@ def test_on_a_straight_without_yaw_moment_it_is_the_relaxation_model():
     np.testing.assert_allclose(A1, A0, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(B1, B0, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(f1, f0, atol=1e-12)
+
+
+@pytest.mark.parametrize("mu,ay", [(0.9, 6.2), (0.5, -4.4)])
+def test_an_axle_under_load_transfer_is_the_plants_two_tyres(mu, ay):
+    """At the quasi-static loads of a_y each axle's force is the sum of the plant's two tyres
+    (their K_α(F_z) and the Magic Formula, written here) at the axle's slip, below, at and
+    beyond the peak; at 0.63 g on μ 0.9 the front axle at 0.6 of its static peak slip gives
+    5.5 % less than the same axle at static load."""
+    v = load_vehicle_params()
+    loads = wheel_loads(0.0, ay, LoadGeometry(
+        v.mass_kg, v.cg_to_front_axle_m, v.cg_to_rear_axle_m, v.cg_height_m,
+        v.track_width_front_m, v.track_width_rear_m, v.roll_stiffness_front_share,
+        v.gravity_mps2))
+    tyres = (v.tyre("front"), v.tyre("front"), v.tyre("rear"), v.tyre("rear"))
+    peak_f, peak_r = peak_slips(P_CAR, mu)
+    for share in (0.3, 0.6, 1.0, 2.0):
+        z = np.zeros(FM.N_STATE_FRICTION)
+        z[StateIdx.VX] = V
+        z[R_.ALPHA_F], z[R_.ALPHA_R] = math.copysign(share, ay) * np.array([peak_f, peak_r])
+        (ff, _, _), (fr, _, _), _ = FM.axle_forces(z, 0.0, P_CAR, FM.Grip(mu, 0.0, ay))
+        plant = [_mf(z[R_.ALPHA_F if i < 2 else R_.ALPHA_R],
+                     float(cornering_stiffness(fz, tyres[i])), mu * fz)
+                 for i, fz in enumerate(loads)]
+        assert ff == pytest.approx(plant[0] + plant[1], rel=1e-9)
+        assert fr == pytest.approx(plant[2] + plant[3], rel=1e-9)
+        if share == 0.6 and mu == 0.9:
+            (f_static, _, _), _, _ = FM.axle_forces(z, 0.0, P_CAR, FM.Grip(mu, 0.0, 0.0))
+            assert ff / f_static == pytest.approx(0.945, abs=0.003)
 
 
 def test_a_yaw_moment_costs_lateral_grip_by_the_friction_ellipse():

@@ -39,10 +39,21 @@ class LoadGeometry:
 
 def wheel_loads(ax: float, ay: float, g: LoadGeometry) -> tuple[float, float, float, float]:
     """(F_z,FL, F_z,FR, F_z,RL, F_z,RR), N, of the module docstring."""
-    front, rear = g.static_loads()
-    mh = g.mass_kg * g.cg_height_m
-    dl = 0.5 * mh * ax / (g.cg_to_front_axle_m + g.cg_to_rear_axle_m)
-    df = g.roll_stiffness_front_share * mh * ay / g.track_width_front_m
-    dr = (1.0 - g.roll_stiffness_front_share) * mh * ay / g.track_width_rear_m
-    f, r = front - dl, rear + dl
+    return loads(ax, ay, g.mass_kg, g.cg_to_front_axle_m, g.cg_to_rear_axle_m, g.cg_height_m,
+                 g.track_width_front_m, g.track_width_rear_m, g.roll_stiffness_front_share,
+                 g.gravity_mps2)
+
+
+def loads(ax: float, ay: float, mass_kg: float, a_m: float, b_m: float, h_m: float,
+          track_front_m: float, track_rear_m: float, chi_front: float, gravity_mps2: float
+          ) -> tuple[float, float, float, float]:
+    """:func:`wheel_loads` on plain floats (what a compiled caller can take: the MPC's
+    prediction compiles this function)."""
+    length = a_m + b_m
+    w = mass_kg * gravity_mps2
+    mh = mass_kg * h_m
+    dl = 0.5 * mh * ax / length
+    df = chi_front * mh * ay / track_front_m
+    dr = (1.0 - chi_front) * mh * ay / track_rear_m
+    f, r = 0.5 * w * b_m / length - dl, 0.5 * w * a_m / length + dl
     return max(f - df, 0.0), max(f + df, 0.0), max(r - dr, 0.0), max(r + dr, 0.0)

@@ -46,6 +46,7 @@ def force(alpha: float, k: float, d: float, c: float, e: float
     return d * g, d * dg * b, g - z * dg
 
 
+@njit(cache=True)
 def stiffness_at_load(k_static: float, fz_static: float, fz: float, peak_load: float
                       ) -> float:
     """A tyre's cornering stiffness (N/rad) at load ``fz`` (N), from its value ``k_static`` at

@@ -2,19 +2,23 @@
 
 Beyond the paper (docs/mpc.md, "Friction-aware prediction"). The state and input are those of
 ``relaxation_model``; each axle's lateral force is the Magic Formula of ``axle_tyre`` on its
-transient slip α' instead of eq. (1)'s C α'::
+transient slip α', summed over its two tyres, instead of eq. (1)'s C α'::
 
-    F_f = F(α'f; 2 C_cf, D_f),   F_r = F(α'r; 2 C_cr, D_r)
+    F_f = Σ_{FL,FR} F(α'f; K_i, D_i),   F_r = Σ_{RL,RR} F(α'r; K_i, D_i)
     v̇y = (F_f + F_r)/m − vx r
     v̇x = 2/m [C_lf S_f + C_lr S_r] − (F_f δf,act + F_r δr,act)/m + vy r
     ṙ  = (a F_f − b F_r)/Iz + Mz/Iz
 
-The peaks follow the estimated road and the friction ellipse. Static axle loads
-F_z,f = m g b/L and F_z,r = m g a/L. The yaw moment's longitudinal forces, shared by load as
-the load-ratio allocation does (eq. 25-31), use the same fraction of every wheel's grip on one
-side: η_R,L = (a_x ± 2 Mz/(B m))/(μ̂ g) with a_x the measured drive. So::
+Each tyre sits at the quasi-static load F_z,i of the measured a_x, a_y
+(``fourws_common.load_transfer``, held over the horizon) with its stiffness at that load,
+K_i = C_c K_α(F_z,i)/K_α(F_z,static) (``axle_tyre.stiffness_at_load``): under lateral
+transfer an axle is softer than at static load, 5.5 % at the front at 0.63 g and 0.6 of its
+peak slip; with a_x = a_y = 0 the two tyres are the axle of static load (2 C_c, μ̂ m g b/L).
+The peaks follow the estimated road and the friction ellipse. The yaw moment's longitudinal
+forces, shared by load as the load-ratio allocation does (eq. 25-31), use the same fraction of
+every wheel's grip on one side: η_R,L = (a_x ± 2 Mz/(B m))/(μ̂ g) with a_x the measured drive. So::
 
-    D = μ̂ F_z ε(Mz),   ε = ½ [√(1 − η_L²) + √(1 − η_R²)]        (friction ellipse)
+    D_i = μ̂ F_z,i ε(Mz),   ε = ½ [√(1 − η_L²) + √(1 − η_R²)]        (friction ellipse)
 
 Linearised at (ζ0, u0) each step, the prediction sees the tyre's falling stiffness beyond its
 peak and that a yaw moment costs lateral grip (successive linearisation, Falcone et al. 2007).
@@ -29,9 +33,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from fourws_common import load_transfer
 from fourws_mpc.core import relaxation_model
 from fourws_mpc.core.actuator_model import ActIdx
-from fourws_mpc.core.axle_tyre import force
+from fourws_mpc.core.axle_tyre import force, stiffness_at_load
 from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, as_vector, packed
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
@@ -46,6 +51,7 @@ class Grip:
 
     mu: float = 1.0
     ax_mps2: float = 0.0
+    ay_mps2: float = 0.0
 
 
 def axle_loads(p: ModelParams | ModelTuple) -> tuple[float, float]:
@@ -56,6 +62,7 @@ def axle_loads(p: ModelParams | ModelTuple) -> tuple[float, float]:
 
 
 _axle_loads = njit(cache=True)(axle_loads)
+_wheel_loads = njit(cache=True)(load_transfer.loads)
 
 
 def ellipse(mz: float, p: ModelParams, g: Grip) -> tuple[float, float]:
@@ -84,26 +91,37 @@ def _ellipse(mz: float, p: ModelTuple, mu: float, ax: float) -> tuple[float, flo
 def axle_forces(zeta: np.ndarray, mz: float, p: ModelParams, g: Grip
                 ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """((F, ∂F/∂α', ∂F/∂Mz) front, the same rear, ε) at ζ_t."""
-    return _axle_forces(as_vector(zeta), float(mz), packed(p), float(g.mu), float(g.ax_mps2))
+    return _axle_forces(as_vector(zeta), float(mz), packed(p), float(g.mu), float(g.ax_mps2),
+                        float(g.ay_mps2))
 
 
 @njit(cache=True)
-def _axle_forces(zeta: np.ndarray, mz: float, p: ModelTuple, mu: float, ax: float
+def _axle_forces(zeta: np.ndarray, mz: float, p: ModelTuple, mu: float, ax: float, ay: float
                  ) -> tuple[tuple[float, float, float], tuple[float, float, float], float]:
     """:func:`axle_forces`, compiled."""
     eps, deps = _ellipse(mz, p, mu, ax)
     fz_f, fz_r = _axle_loads(p)
-    front = _axle(zeta[RelaxIdx.ALPHA_F], 2.0 * p.c_cf, mu * fz_f, eps, deps, p)
-    rear = _axle(zeta[RelaxIdx.ALPHA_R], 2.0 * p.c_cr, mu * fz_r, eps, deps, p)
+    fl, fr, rl, rr = _wheel_loads(ax, ay, p.mass_kg, p.a_m, p.b_m, p.cg_height_m,
+                                  p.track_width_m, p.track_width_m,
+                                  p.roll_stiffness_front_share, p.gravity_mps2)
+    front = _axle(zeta[RelaxIdx.ALPHA_F], p.c_cf, 0.5 * fz_f, fl, fr, mu, eps, deps, p)
+    rear = _axle(zeta[RelaxIdx.ALPHA_R], p.c_cr, 0.5 * fz_r, rl, rr, mu, eps, deps, p)
     return front, rear, eps
 
 
 @njit(cache=True)
-def _axle(alpha: float, k: float, peak: float, eps: float, deps: float, p: ModelTuple
-          ) -> tuple[float, float, float]:
-    f, df_da, df_dd = force(alpha, k, peak * eps, p.tyre_shape_lateral,
-                            p.tyre_curvature_lateral)
-    return f, df_da, df_dd * peak * deps
+def _axle(alpha: float, c_static: float, fz_static: float, fz_left: float, fz_right: float,
+          mu: float, eps: float, deps: float, p: ModelTuple) -> tuple[float, float, float]:
+    """(F, ∂F/∂α', ∂F/∂Mz) of an axle's two tyres at their loads (module docstring)."""
+    f, df_da, df_dmz = 0.0, 0.0, 0.0
+    for fz in (fz_left, fz_right):
+        if fz > 0.0:
+            k = stiffness_at_load(c_static, fz_static, fz, p.tyre_stiffness_peak_load_n)
+            peak = mu * fz
+            fi, dfi_da, dfi_dd = force(alpha, k, peak * eps, p.tyre_shape_lateral,
+                                       p.tyre_curvature_lateral)
+            f, df_da, df_dmz = f + fi, df_da + dfi_da, df_dmz + dfi_dd * peak * deps
+    return f, df_da, df_dmz
 
 
 @njit(cache=True)
@@ -124,7 +142,8 @@ def _tyre_rows(out: np.ndarray, zeta: np.ndarray, u: np.ndarray, p: ModelTuple,
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip) -> np.ndarray:
     """f(ζ_t, u) of the module docstring. Shapes (10,), (3,) → (10,)."""
     relaxation_model.check(p)
-    return _dynamics(as_vector(zeta), as_vector(u), packed(p), float(g.mu), float(g.ax_mps2))
+    return _dynamics(as_vector(zeta), as_vector(u), packed(p), float(g.mu), float(g.ax_mps2),
+                     float(g.ay_mps2))
 
 
 def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
@@ -133,25 +152,25 @@ def jacobians(zeta: np.ndarray, u: np.ndarray, p: ModelParams, g: Grip
     the positions, actuators and slips, and the tyre rows of the module docstring."""
     relaxation_model.check(p)
     return jacobians_compiled(as_vector(zeta), as_vector(u), packed(p), float(g.mu),
-                              float(g.ax_mps2))
+                              float(g.ax_mps2), float(g.ay_mps2))
 
 
 
 @njit(cache=True)
-def _dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float
+def _dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float, ay: float
               ) -> np.ndarray:
-    (ff, _, _), (fr, _, _), _ = _axle_forces(zeta, u[InputIdx.MZ], p, mu, ax)
+    (ff, _, _), (fr, _, _), _ = _axle_forces(zeta, u[InputIdx.MZ], p, mu, ax, ay)
     return _tyre_rows(relaxation_model.dynamics_compiled(zeta, u, p), zeta, u, p, ff, fr)
 
 
 @njit(cache=True)
-def jacobians_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def jacobians_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float,
+                       ay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`jacobians` on a :data:`~fourws_mpc.core.model.ModelTuple` and the road
     (μ̂, a_x), compiled."""
     S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
     f, A, B = relaxation_model.jacobians_compiled(zeta, u, p)
-    (ff, dff, mzf), (fr, dfr, mzr), _ = _axle_forces(zeta, u[I.MZ], p, mu, ax)
+    (ff, dff, mzf), (fr, dfr, mzr), _ = _axle_forces(zeta, u[I.MZ], p, mu, ax, ay)
     f = _tyre_rows(f, zeta, u, p, ff, fr)          # the forces computed once per step
     vy, vx, r = zeta[S.VY], zeta[S.VX], zeta[S.R]
     df, dr = zeta[A_.DF_ACT], zeta[A_.DR_ACT]

@@ -166,7 +166,8 @@ class SingleTrackFrictionModel(SingleTrackRelaxationModel):
         zeta, u = as_vector(zeta), as_vector(u)
         g = self.grip
         return self._disc(*friction_model.jacobians_compiled(
-            zeta, u, self._packed, float(g.mu), float(g.ax_mps2)), zeta, u, dt_s)
+            zeta, u, self._packed, float(g.mu), float(g.ax_mps2), float(g.ay_mps2)), zeta, u,
+            dt_s)
 
 
 #: the models whose state holds the transient slips α' (``relaxation_model.RelaxIdx``)
