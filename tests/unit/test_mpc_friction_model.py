@@ -366,6 +366,53 @@ def test_the_controller_keeps_its_commands_inside_the_grip_envelope():
     assert not res.fallback
 
 
+@pytest.mark.parametrize("ay,seen", [(4.0, 4.0), (-150.0, -1.2 * 9.81)])
+def test_the_prediction_takes_the_measured_lateral_acceleration_within_the_ceiling(ay, seen):
+    """The controller hands the prediction the measured a_y for its loads, an absurd one
+    (an IMU spike the input guard lets through) held to μ_ceiling g: the outer tyres' loads
+    stay what a road can give, and the step stays finite."""
+    cfg = MpcConfig(prediction_model="single_track_friction", terminal_cost="lqr",
+                    mu_ceiling=1.2)
+    ctrl = MpcController(cfg)
+    res = ctrl.step(0.0, VehicleSample(0.0, 0.1, 0.0, V, 0.0, 0.0, ax=0.5, ay=ay), _ref(),
+                    mu=0.8)
+    assert ctrl.model.grip.ay_mps2 == pytest.approx(seen, rel=1e-12)
+    assert ctrl.model.grip.ax_mps2 == 0.5
+    assert all(math.isfinite(v) for v in (res.delta_front, res.delta_rear, res.yaw_moment))
+
+
+def test_at_rest_loads_the_two_tyres_are_the_static_axle_and_a_lifted_wheel_drops_out():
+    """a_x = a_y = 0: each axle is F(α'; 2 C_c, μ F_z,axle ε) with its slopes, at any slip
+    and yaw moment (the Magic Formula is homogeneous in K and D together). A lateral
+    acceleration that lifts the inner front wheel leaves the outer one alone, finite."""
+    rng = np.random.default_rng(5)
+    fz_f, fz_r = FM.axle_loads(P_CAR)
+    for _ in range(5):
+        z, u = _point(rng)
+        mz = float(u[InputIdx.MZ])
+        g = FM.Grip(0.7, 0.0, 0.0)
+        eps, deps = FM.ellipse(mz, P_CAR, g)
+        front, rear, _ = FM.axle_forces(z, mz, P_CAR, g)
+        for got, alpha, c, fz in ((front, z[R_.ALPHA_F], P_CAR.c_cf, fz_f),
+                                  (rear, z[R_.ALPHA_R], P_CAR.c_cr, fz_r)):
+            f, df_da, df_dd = force(float(alpha), 2 * c, 0.7 * fz * eps, C, E)
+            np.testing.assert_allclose(got, (f, df_da, df_dd * 0.7 * fz * deps),
+                                       rtol=1e-12, atol=1e-9)
+    v = load_vehicle_params()
+    ay = 13.0                                           # beyond any road: the inner front lifts
+    loads = wheel_loads(0.0, ay, LoadGeometry(
+        v.mass_kg, v.cg_to_front_axle_m, v.cg_to_rear_axle_m, v.cg_height_m,
+        v.track_width_front_m, v.track_width_rear_m, v.roll_stiffness_front_share,
+        v.gravity_mps2))
+    assert loads[0] == 0.0 < loads[1]
+    z = np.zeros(FM.N_STATE_FRICTION)
+    z[StateIdx.VX] = V
+    z[R_.ALPHA_F] = 0.05
+    (ff, dff, _), _, _ = FM.axle_forces(z, 0.0, P_CAR, FM.Grip(1.2, 0.0, ay))
+    outer = _mf(0.05, float(cornering_stiffness(loads[1], v.tyre("front"))), 1.2 * loads[1])
+    assert ff == pytest.approx(outer, rel=1e-9) and math.isfinite(dff)
+
+
 def test_the_paper_models_report_the_mu_and_bound_they_used():
     cfg = MpcConfig()
     ctrl = MpcController(cfg)

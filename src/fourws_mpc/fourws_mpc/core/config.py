@@ -164,17 +164,18 @@ class MpcConfig:
                                       **field_range("tyre_shape_lateral"))
     tyre_curvature_lateral: float = param(-1.0, "Magic Formula curvature factor E of the "
                                           "axle tyre", **field_range("tyre_curvature_lateral"))
-    cg_height_m: float = param(0.54, "CG height h (the μ estimate's load transfer)",
-                               **field_range("cg_height_m"))
+    cg_height_m: float = param(0.54, "CG height h (the tyres' loads in the prediction and "
+                               "the μ estimate)", **field_range("cg_height_m"))
     roll_stiffness_front_share: float = param(
-        0.55, "front share of the roll stiffness (the μ estimate's load transfer)",
+        0.55, "front share of the roll stiffness (the tyres' loads in the prediction and the "
+        "μ estimate)",
         **field_range("roll_stiffness_front_share"))
-    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0 (the μ estimate's "
-                                       "stiffness at a wheel's load)",
+    tyre_nominal_load_n: float = param(2000.0, "tyre nominal load F_z0 (a tyre's stiffness "
+                                       "at its load)",
                                        **field_range("tyre_nominal_load_n"))
     tyre_cornering_load_factor: float = param(
-        2.0, "p_Ky2: the tyre's K_alpha peaks at F_z = p_Ky2 F_z0 (the μ estimate's stiffness "
-        "at a wheel's load)", **field_range("tyre_cornering_load_factor"))
+        2.0, "p_Ky2: the tyre's K_alpha peaks at F_z = p_Ky2 F_z0 (a tyre's stiffness at its "
+        "load)", **field_range("tyre_cornering_load_factor"))
     mu_floor: float = param(0.1, "μ estimate is clamped to at least this (and flagged)",
                             lo=0.01, hi=1.0)
     mu_ceiling: float = param(1.2, "μ estimate is clamped to at most this (and flagged)",

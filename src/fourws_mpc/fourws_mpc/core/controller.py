@@ -430,7 +430,8 @@ class MpcController:
         c, p = self.cfg, self.model.params
         mz = float(self.u_prev[InputIdx.MZ])
         est, mem = self._grip.estimate(zeta, s.ax, s.ay, mz, mu, self.grip_memory, c.dt_s)
-        self.model.grip = Grip(est.mu, s.ax, s.ay)
+        lim = c.mu_ceiling * G            # the loads' accelerations: no road gives more
+        self.model.grip = Grip(est.mu, s.ax, min(max(s.ay, -lim), lim))
         vxb = max(s.vx, c.min_speed_mps)
         r_max = c.yaw_rate_mu_factor * est.mu * G / vxb
         beta = min(math.radians(c.max_sideslip_deg),

@@ -47,7 +47,8 @@ ETA_MAX = 0.99
 
 @dataclass(frozen=True, slots=True)
 class Grip:
-    """The road the prediction assumes at one step: μ̂ and the measured a_x (m/s²)."""
+    """The road the prediction assumes at one step: μ̂ and the measured a_x, a_y (m/s²; the
+    controller keeps the a_y of the loads within μ_ceiling g)."""
 
     mu: float = 1.0
     ax_mps2: float = 0.0
@@ -167,7 +168,7 @@ def _dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: flo
 def jacobians_compiled(zeta: np.ndarray, u: np.ndarray, p: ModelTuple, mu: float, ax: float,
                        ay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`jacobians` on a :data:`~fourws_mpc.core.model.ModelTuple` and the road
-    (μ̂, a_x), compiled."""
+    (μ̂, a_x, a_y), compiled."""
     S, A_, R_, I = StateIdx, ActIdx, RelaxIdx, InputIdx
     f, A, B = relaxation_model.jacobians_compiled(zeta, u, p)
     (ff, dff, mzf), (fr, dfr, mzr), _ = _axle_forces(zeta, u[I.MZ], p, mu, ax, ay)

@@ -101,8 +101,9 @@ class ModelParams:
     track_width_m: float = 1.30
     tyre_shape_lateral: float = 1.3
     tyre_curvature_lateral: float = -1.0
-    #: the μ estimate's (``grip``): CG height h, front roll-stiffness share χ_f (the
-    #: quasi-static load transfer) and the load at which a tyre's K_α peaks, p_Ky2 F_z0
+    #: the tyres' loads (``friction_model``, ``grip``): CG height h, front roll-stiffness
+    #: share χ_f (the quasi-static load transfer) and the load where a tyre's K_α peaks,
+    #: p_Ky2 F_z0
     cg_height_m: float = 0.54
     roll_stiffness_front_share: float = 0.55
     tyre_stiffness_peak_load_n: float = 4000.0

@@ -150,7 +150,7 @@ class SingleTrackRelaxationModel(_Discretised):
 class SingleTrackFrictionModel(SingleTrackRelaxationModel):
     """The relaxation model with saturating axle forces whose peaks follow the road and the
     friction ellipse (``friction_model``). The road is :attr:`grip`, which the controller
-    sets from its μ estimate and the measured a_x before each :meth:`discretise`."""
+    sets from its μ estimate and the measured a_x, a_y before each :meth:`discretise`."""
 
     name = "single_track_friction"
     grip_aware = True
