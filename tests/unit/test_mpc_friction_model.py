@@ -229,6 +229,23 @@ def test_under_hard_braking_the_estimate_holds_whatever_the_lateral_forces_say()
     assert est.source == "evidence" and est.mu < 0.8             # lighter braking: evidence
 
 
+def test_below_the_evidence_speed_the_estimate_holds():
+    """At 5.5 m/s (after a stop from 80 km/h) a 0.1 m/s lateral-velocity error is 1.0° of
+    slip on both axles, enough to pass for the peak: below ``evidence_min_speed`` μ̂ holds
+    where it was, neither following the tyres nor returning to the prior; at the speed it
+    follows them again."""
+    e = _estimator(prior=0.8, evidence_min_speed=10.0)
+    z, ay = _cornering_state(0.3, 0.9)
+    z[StateIdx.VX] = 5.5
+    mem = GripMemory(0.6)
+    for _ in range(50):
+        est, mem = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
+    assert (est.mu, est.source) == (0.6, "held")
+    z[StateIdx.VX] = 10.0
+    est, _ = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
+    assert est.source == "evidence" and est.mu < 0.6
+
+
 def test_tyres_at_half_their_peak_say_nothing_and_noise_makes_no_evidence():
     """At 30 % of the peak slip the force is within the margin of the linear one; and a
     lateral acceleration of the wrong sign (noise on a straight) is never evidence."""

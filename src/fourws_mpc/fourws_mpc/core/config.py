@@ -191,6 +191,10 @@ class MpcConfig:
         0.3, "evidence only while the linear tyres' force asks for at least this share of "
         "the grip the prior mu_default allows (a deficit at a smaller ask is the slip "
         "observer's error; grip.py)", lo=0.0, hi=1.0)
+    mu_evidence_min_speed_mps: float = param(
+        10.0, "evidence only at or above this speed, else μ̂ holds (the slip observer's "
+        "error from a lateral-velocity error e is e/v_x; grip.py)", lo=0.0, hi=100.0,
+        unit="m/s")
     envelope_softness: float = param(
         1e-3, "friction-aware: the β and r bounds are soft, the slack ε relaxing them by this "
         "share of the bound (ε priced by rho like the tracking band)", lo=1e-4, hi=10.0)

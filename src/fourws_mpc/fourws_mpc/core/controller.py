@@ -271,7 +271,8 @@ class MpcController:
         self._grip = (GripEstimator(c.model_params(), GripSettings(
             prior=c.mu_default, floor=c.mu_floor, ceiling=c.mu_ceiling,
             evidence_deficit=c.mu_evidence_deficit, evidence_max_ax=c.mu_evidence_max_ax,
-            evidence_min_ask=c.mu_evidence_min_ask, fall_time_s=c.mu_fall_time_s,
+            evidence_min_ask=c.mu_evidence_min_ask,
+            evidence_min_speed=c.mu_evidence_min_speed_mps, fall_time_s=c.mu_fall_time_s,
             rise_time_s=c.mu_rise_time_s))
             if getattr(self.model, "grip_aware", False) else None)
 

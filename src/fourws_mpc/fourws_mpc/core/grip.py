@@ -19,7 +19,10 @@ between the wheels is not known. And only while the linear tyres ask for at leas
 below half its peak a Magic Formula tyre is within 3 % of linear, so a deficit at a smaller
 ask is the slip observer's error (its lateral-velocity input), not the peak; a road down to
 0.12 μ_prior still shows at its peak slip, where the ask is u*·C μ m g = 2.41 μ m g
-(studies/grip_estimate). μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
+(studies/grip_estimate). Below ``mu_evidence_min_speed_mps`` (10 m/s) μ̂ holds: the slip error
+of a lateral-velocity error e is e/v_x, and at 5.5 m/s the realistic condition's 3σ (0.1 m/s)
+gives 1.0°, past the 0.87° at which the linear tyres ask 0.3 of the prior 0.8's grip; at
+10 m/s it gives 0.57°. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
 ``mu_rise_time_s``, and without evidence returns to the prior ``mu_default`` with
 ``mu_rise_time_s``. μ̂ is never below the grip in use, √(a_x² + a_y²)/g, and is clamped to
 [``mu_floor``, ``mu_ceiling``]; a clamp is flagged.
@@ -46,7 +49,7 @@ import numpy as np
 from fourws_common.load_transfer import LoadGeometry, wheel_loads
 from fourws_mpc.core.axle_tyre import force, stiffness_at_load
 from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse
-from fourws_mpc.core.model import ModelParams
+from fourws_mpc.core.model import ModelParams, StateIdx
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
 #: the μ range the evidence is searched in
@@ -66,6 +69,7 @@ class GripSettings:
     evidence_deficit: float = 0.1
     evidence_max_ax: float = 0.31
     evidence_min_ask: float = 0.3
+    evidence_min_speed: float = 0.0
     fall_time_s: float = 0.05
     rise_time_s: float = 1.0
 
@@ -164,10 +168,11 @@ class GripEstimator:
             mu, note = self._clamp(float(mu_state))
             return GripEstimate(mu, "state", note), GripMemory(mu)
         mu_prev = self.s.prior if memory is None else memory.mu
-        held = abs(ax) > self.s.evidence_max_ax * mu_prev * self.p.gravity_mps2
+        held = (abs(ax) > self.s.evidence_max_ax * mu_prev * self.p.gravity_mps2
+                or zeta[StateIdx.VX] < self.s.evidence_min_speed)
         ev = None if held else self.evidence(zeta, ax, ay, mz, mu_prev)
         if held:
-            mu, source = mu_prev, "held"              # longitudinal use: μ̂ holds
+            mu, source = mu_prev, "held"              # longitudinal use or slow: μ̂ holds
         else:
             target = self.s.prior if ev is None else ev
             tau = self.s.fall_time_s if target < mu_prev else self.s.rise_time_s
