@@ -230,10 +230,10 @@ def test_under_hard_braking_the_estimate_holds_whatever_the_lateral_forces_say()
 
 
 def test_below_the_evidence_speed_the_estimate_holds():
-    """At 5.5 m/s (after a stop from 80 km/h) a 0.1 m/s lateral-velocity error is 1.0° of
-    slip on both axles, enough to pass for the peak: below ``evidence_min_speed`` μ̂ holds
-    where it was, neither following the tyres nor returning to the prior; at the speed it
-    follows them again."""
+    """At 5.5 m/s (the end of the split-μ braking) a 0.1 m/s lateral-velocity error is 1.0°
+    of slip on both axles, enough to pass for the peak. Below ``evidence_min_speed`` μ̂ holds
+    where it was, neither following the tyres (here a real μ 0.3 corner, the rule's cost)
+    nor returning to the prior; a non-finite speed holds too; at the speed it follows them."""
     e = _estimator(prior=0.8, evidence_min_speed=10.0)
     z, ay = _cornering_state(0.3, 0.9)
     z[StateIdx.VX] = 5.5
@@ -241,6 +241,8 @@ def test_below_the_evidence_speed_the_estimate_holds():
     for _ in range(50):
         est, mem = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
     assert (est.mu, est.source) == (0.6, "held")
+    z[StateIdx.VX] = math.nan
+    assert e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)[0].source == "held"
     z[StateIdx.VX] = 10.0
     est, _ = e.estimate(z, 0.0, ay, 0.0, None, mem, 0.01)
     assert est.source == "evidence" and est.mu < 0.6

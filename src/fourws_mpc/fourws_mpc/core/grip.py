@@ -19,7 +19,8 @@ between the wheels is not known. And only while the linear tyres ask for at leas
 below half its peak a Magic Formula tyre is within 3 % of linear, so a deficit at a smaller
 ask is the slip observer's error (its lateral-velocity input), not the peak; a road down to
 0.12 μ_prior still shows at its peak slip, where the ask is u*·C μ m g = 2.41 μ m g
-(studies/grip_estimate). Below ``mu_evidence_min_speed_mps`` (10 m/s) μ̂ holds: the slip error
+(studies/grip_estimate). Below ``mu_evidence_min_speed_mps`` (10 m/s) μ̂ holds (neither
+evidence nor the prior; a non-finite speed too): the slip error
 of a lateral-velocity error e is e/v_x, and at 5.5 m/s the realistic condition's 3σ (0.1 m/s)
 gives 1.0°, past the 0.87° at which the linear tyres ask 0.3 of the prior 0.8's grip; at
 10 m/s it gives 0.57°. μ̂ follows falling evidence with ``mu_fall_time_s``, rising evidence with
@@ -169,7 +170,7 @@ class GripEstimator:
             return GripEstimate(mu, "state", note), GripMemory(mu)
         mu_prev = self.s.prior if memory is None else memory.mu
         held = (abs(ax) > self.s.evidence_max_ax * mu_prev * self.p.gravity_mps2
-                or zeta[StateIdx.VX] < self.s.evidence_min_speed)
+                or not zeta[StateIdx.VX] >= self.s.evidence_min_speed)
         ev = None if held else self.evidence(zeta, ax, ay, mz, mu_prev)
         if held:
             mu, source = mu_prev, "held"              # longitudinal use or slow: μ̂ holds
