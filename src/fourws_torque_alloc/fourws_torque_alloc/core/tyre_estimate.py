@@ -24,17 +24,10 @@ from fourws_common.load_transfer import LoadGeometry, wheel_loads
 
 
 @dataclass(frozen=True)
-class EstimatorParams:
-    """Nominal constants of the estimate (SI; names as in the car file)."""
+class EstimatorParams(LoadGeometry):
+    """Nominal constants of the estimate (SI; names as in the car file): the loads' geometry
+    and the nominal μ."""
 
-    mass_kg: float
-    cg_to_front_axle_m: float
-    cg_to_rear_axle_m: float
-    cg_height_m: float
-    track_width_front_m: float
-    track_width_rear_m: float
-    roll_stiffness_front_share: float
-    gravity_mps2: float
     mu_nominal: float
 
     @classmethod
@@ -53,16 +46,12 @@ class TyreEstimator:
 
     def __init__(self, p: EstimatorParams) -> None:
         self.p = p
-        self._geometry = LoadGeometry(
-            p.mass_kg, p.cg_to_front_axle_m, p.cg_to_rear_axle_m, p.cg_height_m,
-            p.track_width_front_m, p.track_width_rear_m, p.roll_stiffness_front_share,
-            p.gravity_mps2)
         length = p.cg_to_front_axle_m + p.cg_to_rear_axle_m
         self._fy_share = (p.cg_to_rear_axle_m / length, p.cg_to_front_axle_m / length)
 
     def fz(self, ax: float, ay: float) -> np.ndarray:
         """Wheel loads (4,), N."""
-        return np.array(wheel_loads(ax, ay, self._geometry))
+        return np.array(wheel_loads(ax, ay, self.p))
 
     def estimate(self, ax: float, ay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(F_z (4,), F_y (4,), μ (4,))."""
