@@ -209,7 +209,7 @@ def page(rows: list[dict], figs: list[str]) -> str:
         "In the ideal world the controllers take μ and the tyre forces from the plant. Under "
         "the realistic condition they take nothing from it: the MPC estimates μ from the "
         "lateral acceleration against its tyre model (`grip.py`; it holds the estimate while "
-        "|a_x| exceeds 0.31 μ̂ g and below 10 m/s), the allocator assumes μ 0.8 and "
+        "|a_x| exceeds 0.31 μ̂ g or the speed is below 10 m/s), the allocator assumes μ 0.8 and "
         "estimates the loads from the accelerations. In both worlds a wheel-slip limiter "
         "after the allocation (`slip_control.py`: a car's ABS and traction control, rear "
         "axle select-low) scales a wheel's torque down from 10 % to 25 % slip; `..._noslip` "

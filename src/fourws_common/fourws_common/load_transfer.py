@@ -1,5 +1,6 @@
 """Computes the quasi-static wheel loads of measured accelerations: the loads every controller
-assumes (the allocator's tyre estimate, the MPC's μ estimate; docs/lower-layer.md, "Tyre data").
+assumes (the allocator's tyre estimate, the MPC's friction-aware prediction and μ estimate;
+docs/lower-layer.md, "Tyre data").
 
 A rigid body; the roll stiffness splits the lateral transfer between the axles::
 

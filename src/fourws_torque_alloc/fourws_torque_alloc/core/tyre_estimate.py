@@ -5,7 +5,7 @@ measured accelerations a_x, a_y (IMU, m/s², ISO body frame) and the controller'
 vehicle constants (the plant's names, the car file):
 
 * **F_z**, static load plus quasi-static load transfer
-  (:func:`fourws_common.load_transfer.wheel_loads`, shared with the MPC's μ estimate).
+  (:func:`fourws_common.load_transfer.wheel_loads`, shared with the MPC).
 * **F_y**, the single-track model in quasi-steady cornering (yaw moment balance, ṙ ≈ 0):
   F_y,front axle = m a_y b/L, F_y,rear axle = m a_y a/L, each axle's force shared by its two
   wheels in proportion to their estimated loads.
