@@ -21,6 +21,23 @@ RUNS = (("dlc_60_mu05", "improved", {}), ("dlc_60_mu05", "mpc_fws", {}),
         ("dlc_60_mu05", "mpc_4ws", {"terminal_cost": "none"}), ("mu_step", "lqr_ff", {}))
 
 
+def _warm_evidence() -> None:
+    """The μ estimate's bisection (``grip._matching_mu``) runs only once the tyres show their
+    peak, which the short runs above do not reach: call it on a saturating state."""
+    import numpy as np
+
+    from fourws_mpc.core.grip import GripEstimator, GripSettings, peak_slips
+    from fourws_mpc.core.model import ModelParams, StateIdx
+    from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx
+
+    p = ModelParams()
+    zeta = np.zeros(N_STATE_RELAX)
+    zeta[StateIdx.VX] = 16.7
+    zeta[RelaxIdx.ALPHA_F], zeta[RelaxIdx.ALPHA_R] = peak_slips(p, 0.5)
+    if GripEstimator(p, GripSettings()).evidence(zeta, 0.0, 4.0, 0.0, 1.0) is None:
+        raise RuntimeError("warm_jit: the saturating state gave no evidence")
+
+
 def main() -> int:
     t0 = time.perf_counter()
     realistic = load_condition("realistic", 0)
@@ -28,6 +45,7 @@ def main() -> int:
         run_closed_loop(scenario, controller, max_steps=3, mpc_overrides=overrides)
         run_closed_loop(scenario, controller, max_steps=3, mpc_overrides=overrides,
                         condition=realistic)
+    _warm_evidence()
     import fourws_sim
 
     print(f"[setup] numba kernels ready for {fourws_sim.__file__.rsplit('/', 2)[0]} "

@@ -102,12 +102,36 @@ def _axle_forces(zeta: np.ndarray, mz: float, p: ModelTuple, mu: float, ax: floa
     """:func:`axle_forces`, compiled."""
     eps, deps = _ellipse(mz, p, mu, ax)
     fz_f, fz_r = _axle_loads(p)
-    fl, fr, rl, rr = _wheel_loads(ax, ay, p.mass_kg, p.a_m, p.b_m, p.cg_height_m,
-                                  p.track_width_m, p.track_width_m,
-                                  p.roll_stiffness_front_share, p.gravity_mps2)
+    fl, fr, rl, rr = _loads(p, ax, ay)
     front = _axle(zeta[RelaxIdx.ALPHA_F], p.c_cf, 0.5 * fz_f, fl, fr, mu, eps, deps, p)
     rear = _axle(zeta[RelaxIdx.ALPHA_R], p.c_cr, 0.5 * fz_r, rl, rr, mu, eps, deps, p)
     return front, rear, eps
+
+
+@njit(cache=True)
+def _loads(p: ModelTuple, ax: float, ay: float) -> tuple[float, float, float, float]:
+    """The four wheels' quasi-static loads of a_x, a_y (N, FL FR RL RR)."""
+    return _wheel_loads(ax, ay, p.mass_kg, p.a_m, p.b_m, p.cg_height_m, p.track_width_m,
+                        p.track_width_m, p.roll_stiffness_front_share, p.gravity_mps2)
+
+
+@njit(cache=True)
+def tyre_sums(zeta: np.ndarray, p: ModelTuple, mu: float, eps: float, ax: float, ay: float
+              ) -> tuple[float, float]:
+    """(Σ_i F_i, Σ_i K_i α'_i) (N) of the four tyres at their loads of a_x, a_y on a road of
+    μ with the ellipse share ε: the axles' force of the module docstring and its linear
+    value (the μ estimate's evidence, ``grip``), compiled."""
+    fz_f, fz_r = _axle_loads(p)
+    fl, fr, rl, rr = _loads(p, ax, ay)
+    a_f, a_r = zeta[RelaxIdx.ALPHA_F], zeta[RelaxIdx.ALPHA_R]
+    k = p.tyre_stiffness_peak_load_n
+    linear = (a_f * stiffness_at_load(p.c_cf, 0.5 * fz_f, fl, k)
+              + a_f * stiffness_at_load(p.c_cf, 0.5 * fz_f, fr, k)
+              + a_r * stiffness_at_load(p.c_cr, 0.5 * fz_r, rl, k)
+              + a_r * stiffness_at_load(p.c_cr, 0.5 * fz_r, rr, k))
+    force_sum = (_axle(a_f, p.c_cf, 0.5 * fz_f, fl, fr, mu, eps, 0.0, p)[0]
+                 + _axle(a_r, p.c_cr, 0.5 * fz_r, rl, rr, mu, eps, 0.0, p)[0])
+    return force_sum, linear
 
 
 @njit(cache=True)

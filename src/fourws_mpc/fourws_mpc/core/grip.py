@@ -46,11 +46,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from fourws_common.load_transfer import LoadGeometry, wheel_loads
-from fourws_mpc.core.axle_tyre import force, stiffness_at_load
-from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse
-from fourws_mpc.core.model import ModelParams, StateIdx
+from fourws_mpc.core.axle_tyre import force
+from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse, tyre_sums
+from fourws_mpc.core.model import ModelParams, ModelTuple, StateIdx, as_vector, packed
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
 #: the μ range the evidence is searched in
@@ -95,30 +95,19 @@ def _pole(dt_s: float, tau_s: float) -> float:
     return 1.0 - math.exp(-dt_s / tau_s)
 
 
-def _geometry(p: ModelParams) -> LoadGeometry:
-    return LoadGeometry(p.mass_kg, p.a_m, p.b_m, p.cg_height_m, p.track_width_m,
-                        p.track_width_m, p.roll_stiffness_front_share, p.gravity_mps2)
-
-
-def _wheels(p: ModelParams, ax: float, ay: float) -> tuple[tuple[int, float, float], ...]:
-    """(axle slip index, K_i, F_z,i) of the four wheels at the quasi-static loads of a_x,
-    a_y (module docstring)."""
-    g = _geometry(p)
-    front, rear = g.static_loads()
-    fl, fr, rl, rr = wheel_loads(ax, ay, g)
-    k = p.tyre_stiffness_peak_load_n
-    return tuple((idx, stiffness_at_load(c, static, fz, k), fz)
-                 for idx, c, static, fz in ((RelaxIdx.ALPHA_F, p.c_cf, front, fl),
-                                            (RelaxIdx.ALPHA_F, p.c_cf, front, fr),
-                                            (RelaxIdx.ALPHA_R, p.c_cr, rear, rl),
-                                            (RelaxIdx.ALPHA_R, p.c_cr, rear, rr)))
-
-
-def _tyre_sum(zeta: np.ndarray, wheels: tuple[tuple[int, float, float], ...], p: ModelParams,
-              mu: float, eps: float) -> float:
-    """Σ_i F(α̂'_i; K_i, μ F_z,i ε) (N): the four tyres' Magic Formula forces on a road of μ."""
-    return sum(force(float(zeta[idx]), k, mu * fz * eps, p.tyre_shape_lateral,
-                     p.tyre_curvature_lateral)[0] for idx, k, fz in wheels if fz > 0.0)
+@njit(cache=True)
+def _matching_mu(zeta: np.ndarray, p: ModelTuple, eps: float, ax: float, ay: float,
+                 f_abs: float) -> float:
+    """The μ in :data:`MU_SEARCH` at which the four tyres' force magnitude equals ``f_abs``
+    (40 bisections; the force grows with μ), compiled: the hot part of the evidence."""
+    lo, hi = MU_SEARCH
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if abs(tyre_sums(zeta, p, mid, eps, ax, ay)[0]) < f_abs:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 class GripEstimator:
@@ -140,25 +129,17 @@ class GripEstimator:
         """The μ for which the tyres' forces at α̂' and the loads of a_x, a_y sum to m a_y,
         when the linear tyres ask for at least ``evidence_min_ask`` of the grip the prior
         allows and exceed m a_y by the margin (module docstring); else None."""
-        p = self.p
+        p, z, packed_p = self.p, as_vector(zeta), packed(self.p)
         f = p.mass_kg * ay
         weight = p.mass_kg * p.gravity_mps2
-        wheels = _wheels(p, ax, ay)
-        linear = sum(k * zeta[idx] for idx, k, _ in wheels)
+        _, linear = tyre_sums(z, packed_p, 1.0, 1.0, ax, ay)
         if (f * linear <= 0.0 or abs(linear) < self.s.evidence_min_ask * self.s.prior * weight
                 or abs(linear) - abs(f) < self.s.evidence_deficit * weight):
             return None
         eps, _ = ellipse(mz, p, Grip(mu_now, ax))
-        lo, hi = MU_SEARCH
-        if abs(_tyre_sum(zeta, wheels, p, hi, eps)) < abs(f):
+        if abs(tyre_sums(z, packed_p, MU_SEARCH[1], eps, ax, ay)[0]) < abs(f):
             return None                       # no road explains it: not evidence
-        for _ in range(40):
-            mid = 0.5 * (lo + hi)
-            if abs(_tyre_sum(zeta, wheels, p, mid, eps)) < abs(f):
-                lo = mid
-            else:
-                hi = mid
-        return 0.5 * (lo + hi)
+        return _matching_mu(z, packed_p, eps, ax, ay, abs(f))
 
     def estimate(self, zeta: np.ndarray, ax: float, ay: float, mz: float,
                  mu_state: float | None, memory: GripMemory | None, dt_s: float
