@@ -60,6 +60,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from fourws_mpc.core.condense import condense, constraints
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx
@@ -77,9 +78,9 @@ from fourws_mpc.core.terminal_cost import (
     output_index,
     output_positions,
     reference_rows,
+    reference_rows_compiled,
 )
 
-_EYE_U = np.eye(N_INPUT)
 _ZERO_U = np.zeros(N_INPUT)
 #: rows of the augmented state picked by C: outputs (φ, Y) then hard-bounded states (vy, r)
 OUT_ROWS = (StateIdx.PHI, StateIdx.Y, StateIdx.VY, StateIdx.R)
@@ -93,13 +94,25 @@ def augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Augmented matrices of eq. (5) for a model of n states (A_k (n, n)): Ã (n+3, n+3),
     B̃ (n+3, 3), d̃ (n+3,); (9, 9), (9, 3), (9,) for eq. (1)."""
-    n = Ak.shape[0]
-    Aa = np.zeros((n + N_INPUT, n + N_INPUT))
+    f = np.ascontiguousarray
+    return _augment(f(Ak, dtype=float), f(Bk, dtype=float), f(dk, dtype=float))
+
+
+@njit(cache=True)
+def _augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`augment`, compiled."""
+    n, nu = Bk.shape
+    Aa = np.zeros((n + nu, n + nu))
+    Ba = np.zeros((n + nu, nu))
+    da = np.zeros(n + nu)
     Aa[:n, :n] = Ak
     Aa[:n, n:] = Bk
-    Aa[n:, n:] = _EYE_U
-    Ba = np.vstack([Bk, _EYE_U])
-    da = np.concatenate([dk, _ZERO_U])
+    Ba[:n] = Bk
+    da[:n] = dk
+    for c in range(nu):
+        Aa[n + c, n + c] = 1.0
+        Ba[n + c, c] = 1.0
     return Aa, Ba, da
 
 
@@ -303,17 +316,67 @@ class QpLayout:
         return np.vstack([top, eps_row, ub, soft, soft, soft, soft])
 
 
-def _terminal(terminal_w: np.ndarray | None, ref: np.ndarray, n: int
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(W, z_ref, positions of the levelled outputs) for ``condense``; W's size says how many
+def _terminal(terminal_w: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(W, positions of the levelled outputs) for ``condense``; W's size says how many
     output levels z carries (``terminal_cost.levelled_outputs``)."""
     if terminal_w is None:
-        return _NO_TERMINAL, _ZERO_U, output_index(n)
+        return _NO_TERMINAL, output_index(n)
     n_levels = terminal_w.shape[0] - len(lateral_rows(n))
     if not 1 <= n_levels <= len(OUTPUTS):
         raise ValueError(f"terminal weight of size {terminal_w.shape[0]}: a model of {n} states "
                          f"takes {len(lateral_rows(n)) + 1} or {len(lateral_rows(n)) + 2}")
-    return terminal_w, reference_rows(ref, n, n_levels), output_index(n, n_levels)
+    return terminal_w, output_index(n, n_levels)
+
+
+@njit(cache=True)
+def _build(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, zeta0: np.ndarray,
+           u_prev: np.ndarray, ref: np.ndarray, out_rows: np.ndarray, n_c: int, D: np.ndarray,
+           q_eff: np.ndarray, r_eff: np.ndarray, s_level: np.ndarray, lat_rows: np.ndarray,
+           out_pos: np.ndarray, out_both: np.ndarray, W: np.ndarray, A: np.ndarray,
+           lo: np.ndarray, hi: np.ndarray, en: np.ndarray, u_min: np.ndarray,
+           u_max: np.ndarray, band: np.ndarray, vy_max: float, r_max: float,
+           state_bounds: bool, from_step: int, softness: float
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """One step's QP in one compiled call: eq. (5) (:func:`augment`), the terminal
+    reference (``terminal_cost.reference_rows``), ``condense`` and ``constraints`` (A, lo,
+    hi filled in place); returns H and q = [g; 0] (the slack has no linear cost)."""
+    n, nu = Bk.shape
+    Aa, Ba, da = _augment(Ak, Bk, dk)
+    xi = np.empty(n + nu)
+    xi[:n] = zeta0
+    xi[n:] = u_prev
+    z_ref = (reference_rows_compiled(ref, out_both, lat_rows.shape[0], out_pos.shape[0])
+             if W.shape[0] > 0 else np.zeros(0))
+    H, g, th_out, e_free, th_hard, hard_free = condense(
+        Aa, Ba, da, xi, out_rows, n_c, D, ref, q_eff, r_eff, u_prev, s_level, lat_rows,
+        out_pos, W, z_ref)
+    constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en, u_min, u_max, u_prev,
+                band, vy_max, r_max, state_bounds, from_step, softness)
+    q = np.zeros(g.shape[0] + 1)
+    q[:-1] = g
+    return H, q
+
+
+@njit(cache=True)
+def _plan(x: np.ndarray, en: np.ndarray, du_max: np.ndarray, u_prev: np.ndarray,
+          u_lo: np.ndarray, u_hi: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(ΔŨ, ΔU, U, ε) of a solution z = [ΔŨ; ε]: Δũ clipped to the enabled box, the
+    increments in SI, the levels u(k−1) + Σ Δu clipped to [u_lo, u_hi], ε ≥ 0."""
+    nu = du_max.shape[0]
+    n_c = (x.shape[0] - 1) // nu
+    dus = np.empty((n_c, nu))
+    du = np.empty((n_c, nu))
+    u = np.empty((n_c, nu))
+    total = np.zeros(nu)                     # Σ_{l≤j} Δu_l, then added to u(k−1)
+    for j in range(n_c):
+        for c in range(nu):
+            k = j * nu + c
+            dus[j, c] = min(max(x[k], -en[k]), en[k])
+            du[j, c] = dus[j, c] * du_max[c]
+            total[c] += du[j, c]
+            u[j, c] = min(max(u_prev[c] + total[c], u_lo[c]), u_hi[c])
+    return dus, du, u, max(x[x.shape[0] - 1], 0.0)
 
 
 def _csc_order(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -334,7 +397,8 @@ def unconstrained_gain(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, n_p: int,
     Aa, Ba, da = augment(Ak, Bk, dk)
     D = np.tile(np.asarray(du_max, dtype=float), n_c)
     ref = np.zeros((n_p, 2))
-    W, z_ref, out = _terminal(terminal_w, ref, n)
+    W, out = _terminal(terminal_w, n)
+    z_ref = _ZERO_U if W.shape[0] == 0 else reference_rows(ref, n, len(out))
     level = _ZERO_U if s_level is None else s_level
 
     def cost(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -397,36 +461,26 @@ class MpcQp:
         nu = N_INPUT
         inst = self.instance(n_p, n_c)
         n = Ak.shape[0]
-        Aa, Ba, da = augment(Ak, Bk, dk)
-        xi = np.concatenate([zeta0, u_prev])
         D, en, band = inst.tiled(bounds)
-        W, z_ref, out = _terminal(terminal_w, ref, n)
-        H, g, th_out, e_free, th_hard, hard_free = condense(
-            Aa, Ba, da, xi, _OUT_ROWS, n_c, D, np.ascontiguousarray(ref, dtype=float),
-            q_eff, r_eff, u_prev, _ZERO_U if s_level is None else s_level,
-            lateral_rows(n), out, W, z_ref)
-        qvec = np.concatenate([g, [0.0]])
-        A, lo, hi, ncol = inst.A, inst.lo, inst.hi, inst.ncol
-        constraints(A, lo, hi, th_out, e_free, th_hard, hard_free, D, en,
-                    _as_float(bounds.lower()), _as_float(bounds.u_max),
-                    u_prev, band, float(bounds.vy_max), float(bounds.r_max),
-                    bool(bounds.state_bounds), int(bounds.state_bounds_from_step),
-                    float(bounds.state_softness))
-
+        W, out = _terminal(terminal_w, n)
+        f = _as_float
+        lower = bounds.lower()
+        H, qvec = _build(f(Ak), f(Bk), f(dk), f(zeta0), f(u_prev), f(ref), _OUT_ROWS, n_c, D,
+                         f(q_eff), f(r_eff), _ZERO_U if s_level is None else f(s_level),
+                         lateral_rows(n), out, output_index(n), W, inst.A, inst.lo, inst.hi,
+                         en, f(lower), f(bounds.u_max), band, float(bounds.vy_max),
+                         float(bounds.r_max), bool(bounds.state_bounds),
+                         int(bounds.state_bounds_from_step), float(bounds.state_softness))
         warm = None
         if warm_du_scaled is not None:
             warm = np.concatenate([_clip(warm_du_scaled.reshape(-1), -en, en), [0.0]])
-        res = self.solver.solve(CondensedQp(inst.pattern, H, 2.0 * rho, qvec, A, lo, hi),
-                                warm)
+        res = self.solver.solve(CondensedQp(inst.pattern, H, 2.0 * rho, qvec, inst.A, inst.lo,
+                                            inst.hi), warm)
         inst.uses += 1
-        x = res.x
-        if x is None:
+        if res.x is None:
             empty = np.zeros((n_c, nu))
             return QpSolution(False, res.detail, res.iterations, empty, empty, 0.0,
                               np.zeros((n_c, nu)), res.status)
-        dus = _clip(x[:ncol], -en, en).reshape(n_c, nu)
-        du = dus * bounds.du_max[None, :]
-        u = _clip(u_prev[None, :] + np.cumsum(du, axis=0),
-                  bounds.lower()[None, :], bounds.u_max[None, :])
-        return QpSolution(True, res.detail, res.iterations, du, u, max(float(x[-1]), 0.0),
-                          dus, res.status)
+        dus, du, u, slack = _plan(f(res.x), en, f(bounds.du_max), f(u_prev), f(lower),
+                                  f(bounds.u_max))
+        return QpSolution(True, res.detail, res.iterations, du, u, slack, dus, res.status)

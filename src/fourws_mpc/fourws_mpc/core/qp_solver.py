@@ -160,7 +160,7 @@ def trusted(status: QpStatus, x: np.ndarray | None, accept_inaccurate: bool) -> 
     """The one status rule: optimal (or optimal-inaccurate when accepted) and finite."""
     good = status is QpStatus.SOLVED or (accept_inaccurate
                                          and status is QpStatus.SOLVED_INACCURATE)
-    return bool(good and x is not None and np.all(np.isfinite(x)))
+    return bool(good and x is not None and np.isfinite(x).all())
 
 
 @njit(cache=True)
@@ -300,20 +300,18 @@ class DaqpSolver:
         import daqp
 
         f = np.ascontiguousarray
-        P, lo, hi, code = _daqp_data(f(qp.H, dtype=float), float(qp.slack_hessian),
-                                     f(qp.q, dtype=float), f(qp.A, dtype=float),
-                                     f(qp.lo, dtype=float), f(qp.hi, dtype=float), OSQP_INFTY,
-                                     DAQP_INF)
-        if code:
-            return QpResult(QpStatus.INVALID_DATA, f"invalid data: {_INVALID[code]}", None, 0)
-        nz = qp.pattern.nz
-        sense = np.zeros(len(hi), dtype=np.int32)
         # the pattern's leading identity rows go to DAQP as simple bounds on z (bounds
         # longer than A's rows: the first ones bound z), which it handles without a row
-        A = qp.A[qp.pattern.simple:] if qp.pattern.simple == nz else qp.A
-        x, _fval, flag, info = daqp.solve(P, np.ascontiguousarray(qp.q, dtype=float),
-                                          np.ascontiguousarray(A, dtype=float), hi, lo,
-                                          sense, iter_limit=self.settings.max_iter)
+        simple = qp.pattern.simple if qp.pattern.simple == qp.pattern.nz else 0
+        q = f(qp.q, dtype=float)
+        P, A, lo, hi, sense, code = _daqp_data(
+            f(qp.H, dtype=float), float(qp.slack_hessian), q,
+            f(qp.A, dtype=float), f(qp.lo, dtype=float), f(qp.hi, dtype=float), simple,
+            OSQP_INFTY, DAQP_INF)
+        if code:
+            return QpResult(QpStatus.INVALID_DATA, f"invalid data: {_INVALID[code]}", None, 0)
+        x, _fval, flag, info = daqp.solve(P, q, A, hi, lo, sense,
+                                          iter_limit=self.settings.max_iter)
         status = _DAQP_STATUS.get(int(flag), QpStatus.UNSOLVED)
         x = np.asarray(x, dtype=float) if x is not None else None
         if not trusted(status, x, self.settings.accept_inaccurate):
@@ -324,10 +322,12 @@ class DaqpSolver:
 
 @njit(cache=True)
 def _daqp_data(H: np.ndarray, slack: float, q: np.ndarray, A: np.ndarray, lo: np.ndarray,
-               hi: np.ndarray, infty: float, daqp_inf: float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """DAQP's data in one compiled pass: P = blockdiag(½ (H + Hᵀ), slack), the bounds
-    clamped to ±``daqp_inf``, and :func:`_invalid_code` of the QP (0: valid)."""
+               hi: np.ndarray, simple: int, infty: float, daqp_inf: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """DAQP's data in one compiled pass: P = blockdiag(½ (H + Hᵀ), slack), the rows of A
+    after the first ``simple`` (bounds on z itself), the bounds clamped to ±``daqp_inf``,
+    the constraint senses (0: an inequality) and :func:`_invalid_code` of the QP (0:
+    valid)."""
     nz = H.shape[0] + 1
     P = np.zeros((nz, nz))
     for i in range(nz - 1):
@@ -335,7 +335,9 @@ def _daqp_data(H: np.ndarray, slack: float, q: np.ndarray, A: np.ndarray, lo: np
             P[i, j] = 0.5 * (H[i, j] + H[j, i])
     P[nz - 1, nz - 1] = slack
     code = _invalid_code(q, P.ravel(), A.ravel(), lo, hi, infty)
-    return P, np.maximum(lo, -daqp_inf), np.minimum(hi, daqp_inf), code
+    rows = np.ascontiguousarray(A[simple:])
+    return (P, rows, np.maximum(lo, -daqp_inf), np.minimum(hi, daqp_inf),
+            np.zeros(lo.shape[0], dtype=np.int32), code)
 
 
 #: solver name (parameter ``qp_solver``) -> factory

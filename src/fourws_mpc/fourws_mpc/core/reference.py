@@ -175,17 +175,6 @@ class Reference:
             kappa = np.where(under, 0.0, kappa)
         return x, y, yaw, kappa, v
 
-    def sample_pose(self, s_query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """x, y, yaw at arc lengths ``s_query`` (as :meth:`sample`, without the rest)."""
-        sq = np.asarray(s_query, float)
-        s = self.s
-        x = np.interp(sq, s, self.x)
-        y = np.interp(sq, s, self.y)
-        yaw = np.interp(sq, s, self.yaw)
-        if sq.size and (sq.max() > s[-1] or sq.min() < s[0]):
-            x, y, yaw, _, _ = self.sample(sq)
-        return x, y, yaw
-
     def horizon(self, near: NearestPoint, vx: float, dt_s: float, n_p: int,
                 vehicle_yaw: float, frame: str = "path") -> tuple[np.ndarray, np.ndarray]:
         """Reference outputs (φ_ref, Y_ref), each (Np,), at s + vx T i, i = 1..Np.
@@ -193,16 +182,11 @@ class Reference:
         ``frame`` "path" (origin at ``near``, X along its tangent) or "global" (map frame, φ_ref
         within π of ``vehicle_yaw``). See the module docstring.
         """
-        ds = max(vx, 0.0) * dt_s * np.arange(1, n_p + 1)
-        x, y, yaw = self.sample_pose(near.s + ds)
-        if frame == "path":
-            c, s = math.cos(near.yaw), math.sin(near.yaw)
-            y_ref = -s * (x - near.x) + c * (y - near.y)
-            return yaw - near.yaw, y_ref
-        if frame == "global":
-            shift = TWO_PI * round((vehicle_yaw - near.yaw) / TWO_PI)
-            return yaw + shift, y
-        raise ValueError(f"frame: '{frame}' is not one of ['path', 'global']")
+        if frame not in ("path", "global"):
+            raise ValueError(f"frame: '{frame}' is not one of ['path', 'global']")
+        return _horizon(self.s, self.x, self.y, self.yaw, float(near.s), float(near.x),
+                        float(near.y), float(near.yaw), max(float(vx), 0.0) * float(dt_s),
+                        int(n_p), frame == "path", float(vehicle_yaw))
 
     def to_path_frame(self, near: NearestPoint, px: float, py: float, yaw: float
                       ) -> tuple[float, float, float]:
@@ -234,3 +218,42 @@ def _project(xs: np.ndarray, ys: np.ndarray, px: float, py: float, lo: int, hi: 
     if (k == 0 and t_raw < 0.0) or (k == nseg - 1 and t_raw > 1.0):
         t = t_raw
     return k, t, (dx * ry - dy * rx) / math.sqrt(L2)
+
+
+@njit(cache=True)
+def _pose_at(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray,
+             sq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """x, y, yaw at the arc lengths ``sq`` (as :meth:`Reference.sample`: linear
+    interpolation inside, the end headings continued straight beyond the ends)."""
+    x = np.interp(sq, s, xs)
+    y = np.interp(sq, s, ys)
+    yaw = np.interp(sq, s, yaws)
+    last = s.shape[0] - 1
+    for i in range(sq.shape[0]):
+        if sq[i] > s[last]:
+            d = sq[i] - s[last]
+            x[i] = xs[last] + d * math.cos(yaws[last])
+            y[i] = ys[last] + d * math.sin(yaws[last])
+        elif sq[i] < s[0]:
+            d = sq[i] - s[0]
+            x[i] = xs[0] + d * math.cos(yaws[0])
+            y[i] = ys[0] + d * math.sin(yaws[0])
+    return x, y, yaw
+
+
+@njit(cache=True)
+def _horizon(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray, s0: float,
+             x0: float, y0: float, yaw0: float, ds: float, n_p: int, path_frame: bool,
+             vehicle_yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Reference.horizon`, compiled: the poses at s0 + ds i, i = 1..N_p, as (φ_ref,
+    Y_ref) in the path frame at (x0, y0, yaw0), or in the map frame with φ_ref within π of
+    ``vehicle_yaw``."""
+    sq = np.empty(n_p)
+    for i in range(n_p):
+        sq[i] = s0 + ds * (i + 1)
+    x, y, yaw = _pose_at(s, xs, ys, yaws, sq)
+    if path_frame:
+        c, sn = math.cos(yaw0), math.sin(yaw0)
+        return yaw - yaw0, -sn * (x - x0) + c * (y - y0)
+    shift = TWO_PI * round((vehicle_yaw - yaw0) / TWO_PI)
+    return yaw + shift, y

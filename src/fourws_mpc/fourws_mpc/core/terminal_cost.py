@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from fourws_mpc.core.model import StateIdx
+from fourws_mpc.core.small_linalg import matmul_into, solve_into
 
 #: model states left out of the velocity-form state: the speed (held) and X (drives nothing)
 NOT_LATERAL = (StateIdx.VX, StateIdx.X)
@@ -224,39 +225,63 @@ _NO_SOLUTION = ("terminal cost: the DARE has no stabilising solution (the doubli
 
 
 @njit(cache=True)
-def _norm1(M: np.ndarray) -> float:
-    """‖M‖₁, the largest column sum of |M|."""
-    return np.abs(M).sum(axis=0).max()
+def _change_norm1(M: np.ndarray, M0: np.ndarray) -> tuple[float, float]:
+    """(‖M − M0‖₁, ‖M‖₁), the largest column sums; the first is not finite if M is not."""
+    change, size = 0.0, 0.0
+    for j in range(M.shape[1]):
+        cd, cs = 0.0, 0.0
+        for i in range(M.shape[0]):
+            cd += abs(M[i, j] - M0[i, j])
+            cs += abs(M[i, j])
+        if not np.isfinite(cs):
+            return np.inf, np.inf
+        change, size = max(change, cd), max(size, cs)
+    return change, size
 
 
 @njit(cache=True)
 def _sda(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, rtol: float,
          max_steps: int) -> tuple[np.ndarray, bool]:
-    """The doubling of :func:`solve_dare`, compiled: (P, converged)."""
+    """The doubling of :func:`solve_dare`, compiled: (P, converged). Every product goes into
+    a buffer kept across the doublings (``small_linalg``)."""
     n = A.shape[0]
-    G = B @ np.linalg.solve(R, np.ascontiguousarray(B.T))
+    Rf = R.copy()
+    RiBt = np.ascontiguousarray(B.T)
+    if not solve_into(Rf, RiBt):                          # R⁻¹ Bᵀ
+        return Q.copy(), False
+    G = np.empty((n, n))
+    matmul_into(B, RiBt, G)
     H = Q.copy()
     Ak = A.copy()
     W = np.empty((n, n))
     rhs = np.empty((n, 2 * n))
+    Va, Vg, AkT = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    t1, t2, H_next = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     for _ in range(max_steps):
-        W[:, :] = G @ H
+        matmul_into(G, H, W)                              # W = I + G_k H_k
         for i in range(n):
             W[i, i] += 1.0
         rhs[:, :n] = Ak
         rhs[:, n:] = G
-        V = np.linalg.solve(W, rhs)                          # W⁻¹ [A_k, G_k]
-        Va = np.ascontiguousarray(V[:, :n])
-        Vg = np.ascontiguousarray(V[:, n:])
-        AkT = np.ascontiguousarray(Ak.T)
-        H_next = H + AkT @ H @ Va
-        G = G + Ak @ Vg @ AkT
-        Ak = Ak @ Va
-        if not np.all(np.isfinite(H_next)):
+        if not solve_into(W, rhs):                        # W⁻¹ [A_k, G_k]
+            return H, False
+        Va[:, :] = rhs[:, :n]
+        Vg[:, :] = rhs[:, n:]
+        AkT[:, :] = Ak.T
+        matmul_into(H, Va, t1)                            # H_k+1 = H_k + A_kᵀ H_k W⁻¹ A_k
+        matmul_into(AkT, t1, H_next)
+        H_next += H
+        matmul_into(Vg, AkT, t1)                          # G_k+1 = G_k + A_k W⁻¹ G_k A_kᵀ
+        matmul_into(Ak, t1, t2)
+        G += t2
+        matmul_into(Ak, Va, t1)                           # A_k+1 = A_k W⁻¹ A_k
+        Ak[:, :] = t1
+        change, size = _change_norm1(H_next, H)
+        if not np.isfinite(change):
             return H_next, False
-        if _norm1(H_next - H) <= rtol * _norm1(H_next):
+        if change <= rtol * size:
             return 0.5 * (H_next + H_next.T), True
-        H = H_next
+        H[:, :] = H_next
     return H, False
 
 
@@ -289,11 +314,22 @@ def reference_rows(ref: np.ndarray, n_state: int, n_levels: int = len(OUTPUTS)
     of ``n_state`` states, from ``ref`` (N_p, 2) = [φ_ref, Y_ref] at i = 1..N_p: the last
     step's increments of φ_ref and Y_ref in the Δx rows of φ and Y, then the levels of the
     last ``n_levels`` outputs (φ_ref and Y_ref, or Y_ref alone)."""
-    n_l = len(lateral_rows(n_state))
+    return reference_rows_compiled(np.ascontiguousarray(ref, dtype=float),
+                                   output_index(n_state), len(lateral_rows(n_state)), n_levels)
+
+
+@njit(cache=True)
+def reference_rows_compiled(ref: np.ndarray, out_both: np.ndarray, n_l: int, n_levels: int
+                            ) -> np.ndarray:
+    """:func:`reference_rows` from the positions ``out_both`` of φ and Y among the ``n_l``
+    lateral rows (:func:`output_index` with both levels), callable from compiled code."""
+    n_p, n_o = ref.shape
     z = np.zeros(n_l + n_levels)
-    prev = ref[-2] if len(ref) >= 2 else np.zeros(len(OUTPUTS))
-    z[list(output_positions(n_state))] = ref[-1] - prev
-    z[n_l:] = ref[-1][levels(n_levels)]
+    for o in range(n_o):
+        prev = ref[n_p - 2, o] if n_p >= 2 else 0.0
+        z[out_both[o]] = ref[n_p - 1, o] - prev
+    for e in range(n_levels):
+        z[n_l + e] = ref[n_p - 1, n_o - n_levels + e]
     return z
 
 
