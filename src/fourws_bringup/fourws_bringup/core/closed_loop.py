@@ -163,7 +163,7 @@ def run_closed_loop(
         if hasattr(mpc, "report_delivered"):
             mpc.report_delivered(res.yaw_moment - a.unmet_yaw_moment_nm)
         for name in STATE_FIELDS + WHEEL_FIELDS:
-            st[name].append(np.array(getattr(out, name), dtype=float))
+            st[name].append(getattr(out, name))           # as floats at the end
         for name in MPC_FIELDS:
             mp[name].append(getattr(res, name))
         status.append(res.solver_status)
@@ -179,7 +179,7 @@ def run_closed_loop(
     log = ClosedLoopLog(
         scenario=scenario.name, controller=mpc_cfg.controller, allocation=alloc_cfg.method,
         reference=ref,
-        state={k_: np.array(v) for k_, v in st.items()},
+        state={k_: np.array(v, dtype=float) for k_, v in st.items()},
         mpc={k_: np.array(v) for k_, v in mp.items()},
         solver_status=status,
         drive_force_n=np.array(force), drive_torque_nm=np.array(torque),

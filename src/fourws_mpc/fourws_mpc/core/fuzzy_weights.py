@@ -38,6 +38,7 @@ from dataclasses import astuple, dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 IN_LABELS = ("NB", "NS", "ZO", "PS", "PB")
 OUT_LABELS = ("ZO", "PS", "PM", "PB")
@@ -227,17 +228,28 @@ class FuzzyWeights:
     def ratios(self, e_y_m: float, e_phi_rad: float) -> np.ndarray:
         """The four ratios (r_QY, r_Qφ, r_RΔδ, r_RΔMz) at (e_Y m, e_φ rad), shape (4,)."""
         s = self.spec
-        y = min(max(e_y_m, -s.e_y_range_m), s.e_y_range_m)
-        p = min(max(math.degrees(e_phi_rad), -s.e_phi_range_deg), s.e_phi_range_deg)
-        fy = (y + s.e_y_range_m) / self._hy
-        fp = (p + s.e_phi_range_deg) / self._hp
-        iy = min(int(fy), s.grid_y - 2)
-        ip = min(int(fp), s.grid_phi - 2)
-        ty = fy - iy
-        tp = fp - ip
-        S = self.surfaces[:, iy:iy + 2, ip:ip + 2]
-        return ((1 - ty) * ((1 - tp) * S[:, 0, 0] + tp * S[:, 0, 1])
-                + ty * ((1 - tp) * S[:, 1, 0] + tp * S[:, 1, 1]))
+        return _bilinear(self.surfaces, float(e_y_m), math.degrees(e_phi_rad), s.e_y_range_m,
+                         s.e_phi_range_deg, self._hy, self._hp)
+
+
+@njit(cache=True)
+def _bilinear(surfaces: np.ndarray, e_y: float, e_phi_deg: float, range_y: float,
+              range_phi: float, h_y: float, h_phi: float) -> np.ndarray:
+    """:meth:`FuzzyWeights.ratios`, compiled: the four surfaces (4, n_y, n_φ) on their
+    uniform grid, interpolated bilinearly at the clamped errors."""
+    n_y, n_phi = surfaces.shape[1], surfaces.shape[2]
+    fy = (min(max(e_y, -range_y), range_y) + range_y) / h_y
+    fp = (min(max(e_phi_deg, -range_phi), range_phi) + range_phi) / h_phi
+    iy = min(int(fy), n_y - 2)
+    ip = min(int(fp), n_phi - 2)
+    ty = fy - iy
+    tp = fp - ip
+    out = np.empty(surfaces.shape[0])
+    for k in range(surfaces.shape[0]):
+        S = surfaces[k]
+        out[k] = ((1 - ty) * ((1 - tp) * S[iy, ip] + tp * S[iy, ip + 1])
+                  + ty * ((1 - tp) * S[iy + 1, ip] + tp * S[iy + 1, ip + 1]))
+    return out
 
 
 def skfuzzy_control_system(spec: FuzzySpec | None = None, in_points: int = 161):

@@ -1,29 +1,17 @@
-"""Dense kernels for the MPC's small matrices (n ≲ 40), compiled (numba), writing in place.
+"""Solves the MPC's small dense systems (n ≲ 40) in place, compiled (numba).
 
-At these sizes a call into BLAS or LAPACK through numba costs more than the arithmetic
-(argument checks, copies, an allocation per result); plain loops into buffers the caller
-keeps are faster (docs/mpc.md, "Benchmark"). Each kernel is the textbook algorithm;
-``numpy.linalg`` is the oracle of the unit test (tests/unit/test_mpc_small_linalg.py).
+At these sizes LAPACK's solve through numba costs more than the arithmetic (argument checks,
+copies, an allocation per result); Gaussian elimination into the caller's buffers is faster
+(the DARE's doubling, ``terminal_cost``: 25 against 37 µs a solve; docs/mpc.md,
+"Benchmark"). Products stay with BLAS (``np.dot(a, b, out)``), faster than loops even at
+n = 10. ``numpy.linalg.solve`` is the oracle of the unit test
+(tests/unit/test_mpc_small_linalg.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-
-@njit(cache=True)
-def matmul_into(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
-    """out ← A B (A (n, k), B (k, m), out (n, m), distinct from A and B)."""
-    n, k = A.shape
-    m = B.shape[1]
-    for i in range(n):
-        for j in range(m):
-            out[i, j] = 0.0
-        for l in range(k):
-            a = A[i, l]
-            for j in range(m):
-                out[i, j] += a * B[l, j]
 
 
 @njit(cache=True)

@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from fourws_mpc.core.model import StateIdx
-from fourws_mpc.core.small_linalg import matmul_into, solve_into
+from fourws_mpc.core.small_linalg import solve_into
 
 #: model states left out of the velocity-form state: the speed (held) and X (drives nothing)
 NOT_LATERAL = (StateIdx.VX, StateIdx.X)
@@ -242,15 +242,15 @@ def _change_norm1(M: np.ndarray, M0: np.ndarray) -> tuple[float, float]:
 @njit(cache=True)
 def _sda(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, rtol: float,
          max_steps: int) -> tuple[np.ndarray, bool]:
-    """The doubling of :func:`solve_dare`, compiled: (P, converged). Every product goes into
-    a buffer kept across the doublings (``small_linalg``)."""
+    """The doubling of :func:`solve_dare`, compiled: (P, converged). Every product and solve
+    goes into a buffer kept across the doublings (the solve: ``small_linalg.solve_into``)."""
     n = A.shape[0]
     Rf = R.copy()
     RiBt = np.ascontiguousarray(B.T)
     if not solve_into(Rf, RiBt):                          # R⁻¹ Bᵀ
         return Q.copy(), False
     G = np.empty((n, n))
-    matmul_into(B, RiBt, G)
+    np.dot(B, RiBt, G)
     H = Q.copy()
     Ak = A.copy()
     W = np.empty((n, n))
@@ -258,7 +258,7 @@ def _sda(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, rtol: float
     Va, Vg, AkT = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     t1, t2, H_next = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
     for _ in range(max_steps):
-        matmul_into(G, H, W)                              # W = I + G_k H_k
+        np.dot(G, H, W)                                   # W = I + G_k H_k
         for i in range(n):
             W[i, i] += 1.0
         rhs[:, :n] = Ak
@@ -268,13 +268,13 @@ def _sda(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, rtol: float
         Va[:, :] = rhs[:, :n]
         Vg[:, :] = rhs[:, n:]
         AkT[:, :] = Ak.T
-        matmul_into(H, Va, t1)                            # H_k+1 = H_k + A_kᵀ H_k W⁻¹ A_k
-        matmul_into(AkT, t1, H_next)
+        np.dot(H, Va, t1)                                 # H_k+1 = H_k + A_kᵀ H_k W⁻¹ A_k
+        np.dot(AkT, t1, H_next)
         H_next += H
-        matmul_into(Vg, AkT, t1)                          # G_k+1 = G_k + A_k W⁻¹ G_k A_kᵀ
-        matmul_into(Ak, t1, t2)
+        np.dot(Vg, AkT, t1)                               # G_k+1 = G_k + A_k W⁻¹ G_k A_kᵀ
+        np.dot(Ak, t1, t2)
         G += t2
-        matmul_into(Ak, Va, t1)                           # A_k+1 = A_k W⁻¹ A_k
+        np.dot(Ak, Va, t1)                                # A_k+1 = A_k W⁻¹ A_k
         Ak[:, :] = t1
         change, size = _change_norm1(H_next, H)
         if not np.isfinite(change):
