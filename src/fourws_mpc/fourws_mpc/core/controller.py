@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from fourws_common.input_guard import implausible_fields
 from fourws_mpc.core.apcha import apcha, integrated_error
@@ -189,6 +190,17 @@ class MpcResult:
     mu_estimate: float = math.nan
     yaw_moment_bound: float = math.nan
     grip_note: str = ""
+
+
+@njit(cache=True)
+def _clamp_enabled(u: np.ndarray, enabled: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                   ) -> np.ndarray:
+    """u clipped to [lo, hi] per input, 0 where the input is disabled (a new array)."""
+    out = np.zeros(u.shape[0])
+    for i in range(u.shape[0]):
+        if enabled[i]:
+            out[i] = min(max(u[i], lo[i]), hi[i])
+    return out
 
 
 def initial_state(model: PredictionModel, s: VehicleSample, ref: Reference,
@@ -404,7 +416,8 @@ class MpcController:
             h = apcha(e_s, self.e_s_prev, self.du_last, self.n_p, self.n_c, self.apcha_params)
             return _Horizons(h.n_p, h.n_c, e_s, h.k_e, h.k_u)
         k_e = 0.0 if self.e_s_prev is None else abs(e_s - self.e_s_prev) / c.dt_s
-        k_u = float(np.max(np.abs(self.du_last) / self._du_max))
+        k_u = max(abs(d) / m for d, m in zip(self.du_last.tolist(), self._du_max.tolist(),
+                                              strict=True))
         return _Horizons(c.np_baseline, c.nc_baseline, e_s, k_e, k_u)
 
     def _prediction(self, s: VehicleSample, ref: Reference, err: _Errors, hz: _Horizons,
@@ -423,8 +436,9 @@ class MpcController:
         Ak, Bk, dk = self.model.discretise(zeta, self.u_prev, c.dt_s)
         if n_d:
             zeta = predict_over_delay(Ak, Bk, dk, zeta, self.sent.applied(self._schedule))
-        return _Prediction(zeta, np.column_stack([phi_ref[n_d:], y_ref[n_d:]]), Ak, Bk, dk,
-                           memory, grip)
+        ref_out = np.empty((hz.n_p, 2))
+        ref_out[:, 0], ref_out[:, 1] = phi_ref[n_d:], y_ref[n_d:]
+        return _Prediction(zeta, ref_out, Ak, Bk, dk, memory, grip)
 
     def _grip_step(self, zeta: np.ndarray, s: VehicleSample, mu: float | None) -> _GripStep:
         """μ̂ (``grip``), the model's road for this step, and the envelope it gives."""
@@ -542,10 +556,10 @@ class MpcController:
         else:
             fallback = True
             u = self._fallback_input()
-        u = np.where(self._enabled, np.minimum(np.maximum(u, -self._u_max), self._u_max), 0.0)
+        u = _clamp_enabled(u, self._enabled, -self._u_max, self._u_max)
         g = pred.grip
         if g is not None and fallback:     # a held plan obeys the grip's bounds
-            u = np.where(self._enabled, np.minimum(np.maximum(u, g.u_min), g.u_max), 0.0)
+            u = _clamp_enabled(u, self._enabled, g.u_min, g.u_max)
         # the step's history is committed only here: a step that raised changed nothing
         self.du_last = u - self.u_prev
         self.u_prev = u

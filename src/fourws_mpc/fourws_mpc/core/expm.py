@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from fourws_mpc.core.small_linalg import solve_into
+
 #: θ_m of Higham (2005), Table 2.3: the largest ‖A‖₁ for which r_m is accurate to 2^−53
 _THETA = np.array([1.495585217958292e-2, 2.539398330063230e-1, 9.504178996162932e-1,
                    2.097847961257068e0, 5.371920351148152e0])
@@ -81,7 +83,10 @@ def _expm(A: np.ndarray, theta: np.ndarray, b3: np.ndarray,
         if norm > theta[4]:
             s = int(np.ceil(np.log2(norm / theta[4])))
         U, V = _pade13(A / 2.0 ** s, b13)
-    E = np.ascontiguousarray(np.linalg.solve(V - U, V + U))
+    E = V + U
+    if not solve_into(V - U, E):       # (V − U)⁻¹ (V + U); singular only for a NaN A
+        E[:, :] = np.nan
+
     for _ in range(s):
         E = E @ E
     return E

@@ -201,13 +201,19 @@ def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float
 
 def lateral_use(zeta: np.ndarray, p: ModelParams, mu: float) -> float:
     """η_y = max over the axles of |F(α̂')|/D at μ̂ (no longitudinal force)."""
-    use = 0.0
     fz_f, fz_r = axle_loads(p)
-    for alpha, c, fz in ((zeta[RelaxIdx.ALPHA_F], p.c_cf, fz_f),
-                         (zeta[RelaxIdx.ALPHA_R], p.c_cr, fz_r)):
-        d = mu * fz
-        f = force(float(alpha), 2.0 * c, d, p.tyre_shape_lateral, p.tyre_curvature_lateral)[0]
-        use = max(use, abs(f) / d)
+    return _lateral_use(float(zeta[RelaxIdx.ALPHA_F]), float(zeta[RelaxIdx.ALPHA_R]),
+                        2.0 * p.c_cf, 2.0 * p.c_cr, mu * fz_f, mu * fz_r,
+                        p.tyre_shape_lateral, p.tyre_curvature_lateral)
+
+
+@njit(cache=True)
+def _lateral_use(alpha_f: float, alpha_r: float, k_f: float, k_r: float, d_f: float,
+                 d_r: float, c: float, e: float) -> float:
+    """:func:`lateral_use` of the axles' slips α̂', stiffnesses K and peaks D, compiled."""
+    use = 0.0
+    for alpha, k, d in ((alpha_f, k_f, d_f), (alpha_r, k_r, d_r)):
+        use = max(use, abs(force(alpha, k, d, c, e)[0]) / d)
     return min(use, 1.0)
 
 
