@@ -30,31 +30,43 @@ from numba import njit
 @njit(cache=True)
 def _free_and_markov(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
                      n_p: int) -> tuple[np.ndarray, np.ndarray]:
-    """Stages 1-2: free states x_0..x_Np (N_p+1, n_a) and T_0..T_{Np−1} (N_p, n_a, n_u)."""
+    """Stages 1-2: free states x_0..x_Np (N_p+1, n_a) and T_0..T_{Np−1} (N_p, n_a, n_u)
+    (loops: at these sizes a BLAS call per step costs more than its arithmetic)."""
     na, nu = Ba.shape
     x = np.empty((n_p + 1, na))
     x[0] = xi
-    for i in range(1, n_p + 1):
-        x[i] = Aa @ x[i - 1] + da
     T = np.empty((n_p, na, nu))
     T[0] = Ba
+    for i in range(1, n_p + 1):
+        for r in range(na):
+            acc = 0.0
+            for k in range(na):
+                acc += Aa[r, k] * x[i - 1, k]
+            x[i, r] = acc + da[r]
     for m in range(1, n_p):
-        T[m] = Aa @ T[m - 1]
+        for r in range(na):
+            for c in range(nu):
+                acc = 0.0
+                for k in range(na):
+                    acc += Aa[r, k] * T[m - 1, k, c]
+                T[m, r, c] = acc
     return x, T
 
 
 @njit(cache=True)
-def _theta(T: np.ndarray, rows: np.ndarray, n_c: int, D: np.ndarray) -> np.ndarray:
-    """Θ D for the state rows ``rows``: (N_p, len(rows), n_u N_c), step-major."""
+def _theta(T: np.ndarray, rows: np.ndarray, n_c: int, D: np.ndarray, first: int
+           ) -> np.ndarray:
+    """Θ D for the state rows ``rows`` at the prediction steps i = first+1..N_p:
+    (N_p − first, len(rows), n_u N_c), step-major."""
     n_p, _, nu = T.shape
     nr = rows.shape[0]
-    th = np.zeros((n_p, nr, nu * n_c))
-    for i in range(n_p):
+    th = np.zeros((n_p - first, nr, nu * n_c))
+    for i in range(first, n_p):
         for j in range(min(i + 1, n_c)):
             Tm = T[i - j]
             for o in range(nr):
                 for c in range(nu):
-                    th[i, o, j * nu + c] = Tm[rows[o], c] * D[j * nu + c]
+                    th[i - first, o, j * nu + c] = Tm[rows[o], c] * D[j * nu + c]
     return th
 
 
@@ -80,7 +92,7 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
     nu = Ba.shape[1]
     ncol = nu * n_c
     x, T = _free_and_markov(Aa, Ba, da, xi, n_p)
-    th = _theta(T, out_rows, n_c, D)
+    th = _theta(T, out_rows, n_c, D, 0)
     th_out = np.empty((2 * n_p, ncol))
     th_hard = np.empty((2 * n_p, ncol))
     e_free = np.empty(2 * n_p)
@@ -118,18 +130,19 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
         g += 2.0 * (M_t @ (wl * u_t))
     if W.shape[0] > 0:
         n_l = lat_rows.shape[0]
-        th_l = _theta(T, lat_rows, n_c, D)
+        th_l = _theta(T, lat_rows, n_c, D, max(n_p - 2, 0))   # the last two steps only
+        end = th_l.shape[0] - 1
         n_e = out_pos.shape[0]
         Zs = np.empty((n_l + n_e, ncol))
         z = np.empty(n_l + n_e)
         for o in range(n_l):
             r = lat_rows[o]
-            Zs[o] = th_l[n_p - 1, o]
+            Zs[o] = th_l[end, o]
             if n_p >= 2:
-                Zs[o] -= th_l[n_p - 2, o]
+                Zs[o] -= th_l[end - 1, o]
             z[o] = x[n_p, r] - x[n_p - 1, r] - z_ref[o]
         for o in range(n_e):
-            Zs[n_l + o] = th_l[n_p - 1, out_pos[o]]
+            Zs[n_l + o] = th_l[end, out_pos[o]]
             z[n_l + o] = x[n_p, lat_rows[out_pos[o]]] - z_ref[n_l + o]
         cross = 2.0 * (np.ascontiguousarray(Zs.T) @ W)
         H += cross @ Zs
