@@ -141,7 +141,9 @@ class SingleTrackRelaxationModel(_Discretised):
                        memory: Any = None, dt_s: float = 0.0) -> tuple[np.ndarray, Any]:
         """[ζ; δf,act; δr,act; α̂'f; α̂'r]: the measured road-wheel angles and the
         observer's estimate (its memory is returned for the next step)."""
-        z = np.concatenate([zeta[:N_STATE], [steer_front, steer_rear], [0.0, 0.0]])
+        z = np.zeros(relaxation_model.N_STATE_RELAX)
+        z[:N_STATE] = zeta[:N_STATE]
+        z[actuator_model.ActIdx.DF_ACT], z[actuator_model.ActIdx.DR_ACT] = steer_front, steer_rear
         alpha, memory = self.observer.estimate(z, memory, dt_s)
         z[relaxation_model.RelaxIdx.ALPHA_F], z[relaxation_model.RelaxIdx.ALPHA_R] = alpha
         return z, memory

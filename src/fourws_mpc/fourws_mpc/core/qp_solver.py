@@ -303,11 +303,11 @@ class DaqpSolver:
         # the pattern's leading identity rows go to DAQP as simple bounds on z (bounds
         # longer than A's rows: the first ones bound z), which it handles without a row
         simple = qp.pattern.simple if qp.pattern.simple == qp.pattern.nz else 0
-        q = f(qp.q, dtype=float)
-        P, A, lo, hi, sense, code = _daqp_data(
-            f(qp.H, dtype=float), float(qp.slack_hessian), q,
-            f(qp.A, dtype=float), f(qp.lo, dtype=float), f(qp.hi, dtype=float), simple,
-            OSQP_INFTY, DAQP_INF)
+        q, A = f(qp.q, dtype=float), f(qp.A, dtype=float)
+        P, lo, hi, sense, code = _daqp_data(
+            f(qp.H, dtype=float), float(qp.slack_hessian), q, A, f(qp.lo, dtype=float),
+            f(qp.hi, dtype=float), OSQP_INFTY, DAQP_INF)
+        A = A[simple:]                      # rows of a C-ordered matrix: a view, no copy
         if code:
             return QpResult(QpStatus.INVALID_DATA, f"invalid data: {_INVALID[code]}", None, 0)
         x, _fval, flag, info = daqp.solve(P, q, A, hi, lo, sense,
@@ -322,12 +322,11 @@ class DaqpSolver:
 
 @njit(cache=True)
 def _daqp_data(H: np.ndarray, slack: float, q: np.ndarray, A: np.ndarray, lo: np.ndarray,
-               hi: np.ndarray, simple: int, infty: float, daqp_inf: float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """DAQP's data in one compiled pass: P = blockdiag(½ (H + Hᵀ), slack), the rows of A
-    after the first ``simple`` (bounds on z itself), the bounds clamped to ±``daqp_inf``,
-    the constraint senses (0: an inequality) and :func:`_invalid_code` of the QP (0:
-    valid)."""
+               hi: np.ndarray, infty: float, daqp_inf: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """DAQP's data in one compiled pass: P = blockdiag(½ (H + Hᵀ), slack), the bounds
+    clamped to ±``daqp_inf``, the constraint senses (0: an inequality) and
+    :func:`_invalid_code` of the QP (0: valid)."""
     nz = H.shape[0] + 1
     P = np.zeros((nz, nz))
     for i in range(nz - 1):
@@ -335,8 +334,7 @@ def _daqp_data(H: np.ndarray, slack: float, q: np.ndarray, A: np.ndarray, lo: np
             P[i, j] = 0.5 * (H[i, j] + H[j, i])
     P[nz - 1, nz - 1] = slack
     code = _invalid_code(q, P.ravel(), A.ravel(), lo, hi, infty)
-    rows = np.ascontiguousarray(A[simple:])
-    return (P, rows, np.maximum(lo, -daqp_inf), np.minimum(hi, daqp_inf),
+    return (P, np.maximum(lo, -daqp_inf), np.minimum(hi, daqp_inf),
             np.zeros(lo.shape[0], dtype=np.int32), code)
 
 
