@@ -449,13 +449,13 @@ class MpcController:
         self.model.grip = Grip(est.mu, s.ax, min(max(s.ay, -lim), lim))
         vxb = max(s.vx, c.min_speed_mps)
         r_max = c.yaw_rate_mu_factor * est.mu * G / vxb
-        beta = min(math.radians(c.max_sideslip_deg),
-                   peak_slips(p, est.mu)[1] + p.b_m * r_max / vxb)
+        peaks = peak_slips(p, est.mu)
+        beta = min(math.radians(c.max_sideslip_deg), peaks[1] + p.b_m * r_max / vxb)
         mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, s.ax))
         lo, hi = -self._u_max.copy(), self._u_max.copy()
         hi[InputIdx.MZ] = mz_max
         lo[InputIdx.MZ] = -mz_max
-        w_lo, w_hi = steer_window(s.vx, s.vy, s.yaw_rate, p, est.mu)
+        w_lo, w_hi = steer_window(s.vx, s.vy, s.yaw_rate, p, est.mu, peaks)
         for i, ch in enumerate((InputIdx.DF, InputIdx.DR)):
             if self._enabled[ch]:            # a pinned input keeps its bounds around 0
                 lo[ch] = min(max(w_lo[i], lo[ch]), hi[ch])

@@ -188,15 +188,16 @@ def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:
     return (u_star * c * mu * fz_f / (2.0 * p.c_cf), u_star * c * mu * fz_r / (2.0 * p.c_cr))
 
 
-def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float,
+                 peaks: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) road-wheel angles (rad, front and rear) that keep each axle's
     kinematic slip α = δ − (v_y ± l r)/v_x within its peak slip at μ̂: steering beyond the
-    peak gives no more force (module docstring)."""
+    peak gives no more force (module docstring). ``peaks``: :func:`peak_slips` at μ̂ when
+    the caller has them."""
     vxs = max(vx, p.min_speed_mps)
-    kin = np.array([(vy + p.a_m * r) / vxs, (vy - p.b_m * r) / vxs])
-    peak = np.array(peak_slips(p, mu))
-    return kin - peak, kin + peak
+    kin_f, kin_r = (vy + p.a_m * r) / vxs, (vy - p.b_m * r) / vxs
+    pk_f, pk_r = peak_slips(p, mu) if peaks is None else peaks
+    return np.array((kin_f - pk_f, kin_r - pk_r)), np.array((kin_f + pk_f, kin_r + pk_r))
 
 
 def lateral_use(zeta: np.ndarray, p: ModelParams, mu: float) -> float:

@@ -56,15 +56,15 @@ def wheel_slip(m: WheelMotion, a_m: float, b_m: float, track_m: float, radius_m:
                v_min_mps: float) -> tuple[np.ndarray, np.ndarray]:
     """(κ (4,), v (4,) m/s): each wheel's longitudinal slip and its centre's speed along its
     heading (module docstring)."""
+    # per wheel, in the order of ``Wheel`` (FL FR RL RR): position and road-wheel angle
     x = (a_m, a_m, -b_m, -b_m)
     y = (0.5 * track_m, -0.5 * track_m, 0.5 * track_m, -0.5 * track_m)
-    kappa, v = np.empty(4), np.empty(4)
-    for i in Wheel:
-        d = m.steer_front_rad if i in (Wheel.FL, Wheel.FR) else m.steer_rear_rad
-        v[i] = ((m.vx_mps - m.yaw_rate_rad_s * y[i]) * math.cos(d)
-                + (m.vy_mps + m.yaw_rate_rad_s * x[i]) * math.sin(d))
-        kappa[i] = (m.wheel_speed_rad_s[i] * radius_m - v[i]) / max(abs(v[i]), v_min_mps)
-    return kappa, v
+    d = (m.steer_front_rad, m.steer_front_rad, m.steer_rear_rad, m.steer_rear_rad)
+    v = [(m.vx_mps - m.yaw_rate_rad_s * y[i]) * math.cos(d[i])
+         + (m.vy_mps + m.yaw_rate_rad_s * x[i]) * math.sin(d[i]) for i in range(len(Wheel))]
+    kappa = [(m.wheel_speed_rad_s[i] * radius_m - v[i]) / max(abs(v[i]), v_min_mps)
+             for i in range(len(Wheel))]
+    return np.array(kappa), np.array(v)
 
 
 def limit_slip(torque_nm: np.ndarray, m: WheelMotion, *, a_m: float, b_m: float,
