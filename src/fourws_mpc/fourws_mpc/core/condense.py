@@ -114,20 +114,21 @@ def condense(Aa: np.ndarray, Ba: np.ndarray, da: np.ndarray, xi: np.ndarray,
             k = j * nu + c
             H[k, k] += 2.0 * r_eff[c] * D[k] * D[k]
     if np.any(s_level != 0.0):
-        # u(k+j) = u(k−1) + Σ_{l≤j} D Δũ_l; the last planned level held N_p − N_c + 1 times
-        M = np.zeros((ncol, ncol))
-        wl = np.empty(ncol)
-        for j in range(n_c):
+        # u(k+j) = u(k−1) + Σ_{l≤j} D Δũ_l; the last planned level held N_p − N_c + 1 times:
+        # Mᵀ diag(w) M couples Δũ_l and Δũ_l' of one input through the weights of the
+        # levels both reach, S_c(max(l, l')) with S_c(l) = Σ_{j≥l} w_j,c (a suffix sum)
+        S = np.zeros((n_c + 1, nu))
+        for j in range(n_c - 1, -1, -1):
             for c in range(nu):
-                wl[j * nu + c] = s_level[c] * (n_p - n_c + 1.0 if j == n_c - 1 else 1.0)
-                for m in range(j + 1):
-                    M[j * nu + c, m * nu + c] = D[m * nu + c]
-        M_t = np.ascontiguousarray(M.T)
-        H += 2.0 * (M_t @ (M * wl.reshape(-1, 1)))
-        u_t = np.empty(ncol)
-        for j in range(n_c):
-            u_t[j * nu:(j + 1) * nu] = u_prev
-        g += 2.0 * (M_t @ (wl * u_t))
+                S[j, c] = S[j + 1, c] + s_level[c] * (n_p - n_c + 1.0 if j == n_c - 1
+                                                      else 1.0)
+        for c in range(nu):
+            for l1 in range(n_c):
+                a = l1 * nu + c
+                g[a] += 2.0 * D[a] * S[l1, c] * u_prev[c]
+                for l2 in range(n_c):
+                    b = l2 * nu + c
+                    H[a, b] += 2.0 * D[a] * D[b] * S[max(l1, l2), c]
     if W.shape[0] > 0:
         n_l = lat_rows.shape[0]
         th_l = _theta(T, lat_rows, n_c, D, max(n_p - 2, 0))   # the last two steps only
