@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from fourws_mpc.core.model import N_INPUT, InputIdx
 
@@ -61,9 +62,33 @@ def predict_over_delay(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, zeta: np.
     """ζ after ``len(inputs)`` steps of eq. (4) with the given inputs (N_d, 3); or, with ζ
     (n, m) and inputs (N_d, 3, m), the same recursion on the columns of a linear map (the
     stability margins' form, ``fourws_bringup.core.margins``; dk then zero)."""
+    if np.ndim(zeta) == 1:
+        f = np.ascontiguousarray
+        return _predict_state(f(Ak, dtype=float), f(Bk, dtype=float), f(dk, dtype=float),
+                              f(zeta, dtype=float), f(inputs, dtype=float))
     z = zeta
     for u in inputs:
-        z = Ak @ z + Bk @ u + (dk if z.ndim == 1 else dk[:, None])
+        z = Ak @ z + Bk @ u + dk[:, None]
+    return z
+
+
+@njit(cache=True)
+def _predict_state(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, zeta: np.ndarray,
+                   inputs: np.ndarray) -> np.ndarray:
+    """:func:`predict_over_delay` of a state vector, compiled."""
+    n, m = Bk.shape
+    z = zeta.copy()
+    nxt = np.empty(n)
+    for k in range(inputs.shape[0]):
+        for r in range(n):
+            a = 0.0
+            for c in range(n):
+                a += Ak[r, c] * z[c]
+            b = 0.0
+            for c in range(m):
+                b += Bk[r, c] * inputs[k, c]
+            nxt[r] = a + b + dk[r]
+        z[:] = nxt
     return z
 
 

@@ -22,7 +22,7 @@ command for a dead time in substeps on top of the actuator's own lag and rate li
 
 from __future__ import annotations
 
-import dataclasses
+import copy
 import math
 import zlib
 from collections import deque
@@ -204,7 +204,7 @@ class Sensors:
         """The measured state of the plant's outputs ``out`` (a copy when sensed)."""
         if not self.sensed:
             return out
-        seen = dataclasses.replace(out)
+        seen = copy.copy(out)               # shallow, as dataclasses.replace, without __init__
         noisy = bool(self.noise.apply(seen))
         if self.localiser is not None:
             noisy = self.localiser.apply(seen) or noisy
