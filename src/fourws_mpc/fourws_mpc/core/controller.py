@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -113,15 +113,15 @@ class VehicleSample:
 MEAS_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleSample))
 
 
-@dataclass(frozen=True, slots=True)
-class _Errors:
+# the stages' records: named tuples (immutable, and built at a fraction of a frozen
+# dataclass's cost, several times a step)
+class _Errors(NamedTuple):
     near: NearestPoint
     e_y: float
     e_phi: float
 
 
-@dataclass(frozen=True, slots=True)
-class _Horizons:
+class _Horizons(NamedTuple):
     n_p: int
     n_c: int
     e_s: float
@@ -129,16 +129,14 @@ class _Horizons:
     k_u: float
 
 
-@dataclass(frozen=True, slots=True)
-class _Weights:
+class _Weights(NamedTuple):
     q_y: float
     q_phi: float
     r_ddelta: float
     r_dmz: float
 
 
-@dataclass(frozen=True, slots=True)
-class _GripStep:
+class _GripStep(NamedTuple):
     """Stage 5's grip (friction-aware model only): μ̂, its memory, and the envelope."""
 
     estimate: GripEstimate
@@ -149,8 +147,7 @@ class _GripStep:
     u_max: np.ndarray
 
 
-@dataclass(frozen=True, slots=True)
-class _Prediction:
+class _Prediction(NamedTuple):
     zeta: np.ndarray
     ref_out: np.ndarray
     Ak: np.ndarray

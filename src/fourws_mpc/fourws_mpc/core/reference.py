@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -55,9 +56,8 @@ def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
     return float(w) if np.ndim(w) == 0 else w
 
 
-@dataclass(frozen=True, slots=True)
-class NearestPoint:
-    """Projection of a position on the reference path."""
+class NearestPoint(NamedTuple):
+    """Projection of a position on the reference path (a named tuple: built every step)."""
 
     index: int            # start sample of the segment
     s: float              # m, arc length of the projection
@@ -69,8 +69,7 @@ class NearestPoint:
     lateral_error: float  # m, left positive
 
 
-@dataclass(frozen=True, slots=True)
-class PathErrors:
+class PathErrors(NamedTuple):
     """Lateral and heading error of a pose to the path, with the projection point."""
 
     lateral_error: float   # m

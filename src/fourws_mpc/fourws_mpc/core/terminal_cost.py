@@ -18,6 +18,7 @@ still costs through the Y it moves.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -216,7 +217,9 @@ def _within(Ak: np.ndarray, Bk: np.ndarray, q: np.ndarray, r: np.ndarray,
     return True
 
 
-#: the doubling's stopping rule: relative change of P in the 1-norm
+#: the doubling's stopping rule: the error left, predicted from the quadratic convergence as
+#: the square of the last relative change of P (1-norm), at most this (measured on the
+#: shipped model: change 1.6e-8 at the 8th doubling, error then 1.3e-16)
 DARE_RTOL = 1e-13
 #: doubling steps before giving up (the error contracts like ρ_cl^(2^k): 9 suffice here)
 DARE_MAX_STEPS = 40
@@ -279,7 +282,7 @@ def _sda(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, rtol: float
         change, size = _change_norm1(H_next, H)
         if not np.isfinite(change):
             return H_next, False
-        if change <= rtol * size:
+        if change <= math.sqrt(rtol) * size:         # error ≈ change² (quadratic)
             return 0.5 * (H_next + H_next.T), True
         H[:, :] = H_next
     return H, False
