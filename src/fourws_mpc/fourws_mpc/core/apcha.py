@@ -82,7 +82,8 @@ def integrated_error(e_y: float, e_phi: float, p: ApchaParams) -> float:
 
 def input_rate(du: np.ndarray, p: ApchaParams) -> float:
     """k_u of eq. (9): ‖D_Δu⁻¹ Δu‖_∞ for Δu = [Δδf, Δδr, ΔMz] (rad, rad, N·m)."""
-    return float(np.max(np.abs(np.asarray(du, float)) / np.asarray(p.du_max)))
+    return max(abs(d) / m for d, m in zip(np.asarray(du, float).tolist(), p.du_max,
+                                          strict=True))
 
 
 def np_target(e_s: float, p: ApchaParams) -> int:

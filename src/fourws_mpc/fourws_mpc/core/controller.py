@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from fourws_common.input_guard import implausible_fields
-from fourws_mpc.core.apcha import apcha, integrated_error
+from fourws_mpc.core.apcha import apcha, input_rate, integrated_error
 from fourws_mpc.core.config import MpcConfig
 from fourws_mpc.core.cost_scaling import effective_weights, level_weights
 from fourws_mpc.core.delay import (
@@ -413,8 +413,7 @@ class MpcController:
             h = apcha(e_s, self.e_s_prev, self.du_last, self.n_p, self.n_c, self.apcha_params)
             return _Horizons(h.n_p, h.n_c, e_s, h.k_e, h.k_u)
         k_e = 0.0 if self.e_s_prev is None else abs(e_s - self.e_s_prev) / c.dt_s
-        k_u = max(abs(d) / m for d, m in zip(self.du_last.tolist(), self._du_max.tolist(),
-                                              strict=True))
+        k_u = input_rate(self.du_last, self.apcha_params)
         return _Horizons(c.np_baseline, c.nc_baseline, e_s, k_e, k_u)
 
     def _prediction(self, s: VehicleSample, ref: Reference, err: _Errors, hz: _Horizons,

@@ -116,6 +116,7 @@ class GripEstimator:
     def __init__(self, params: ModelParams, settings: GripSettings) -> None:
         self.p = params
         self.s = settings
+        self._packed = packed(params)        # once: the kernels' form of the parameters
 
     def _clamp(self, mu: float) -> tuple[float, str]:
         if not math.isfinite(mu) or mu < self.s.floor:
@@ -129,7 +130,7 @@ class GripEstimator:
         """The μ for which the tyres' forces at α̂' and the loads of a_x, a_y sum to m a_y,
         when the linear tyres ask for at least ``evidence_min_ask`` of the grip the prior
         allows and exceed m a_y by the margin (module docstring); else None."""
-        p, z, packed_p = self.p, as_vector(zeta), packed(self.p)
+        p, z, packed_p = self.p, as_vector(zeta), self._packed
         f = p.mass_kg * ay
         weight = p.mass_kg * p.gravity_mps2
         _, linear = tyre_sums(z, packed_p, 1.0, 1.0, ax, ay)

@@ -212,7 +212,7 @@ class Sensors:
             seen.sideslip = math.atan2(seen.vy, seen.vx)
         if self.tyre_forces != "oracle":
             for name in UNMEASURED_WHEEL_FIELDS:
-                setattr(seen, name, np.zeros_like(np.asarray(getattr(out, name), dtype=float)))
+                setattr(seen, name, np.zeros(np.shape(getattr(out, name))))
         return seen
 
     def act(self, cmd: Any) -> Any:
