@@ -54,8 +54,12 @@ def nearest_sample(x: np.ndarray, y: np.ndarray, px: float, py: float, lo: int =
                    hi: int | None = None) -> int:
     """Index of the sample of ``x[lo:hi]``, ``y[lo:hi]`` nearest to (px, py) (the first of
     equal distances); all samples by default."""
-    d2 = (x[lo:hi] - px) ** 2 + (y[lo:hi] - py) ** 2
-    return lo + int(np.argmin(d2))
+    d2 = x[lo:hi] - px                  # (x − px)² + (y − py)², in place
+    d2 *= d2
+    dy = y[lo:hi] - py
+    dy *= dy
+    d2 += dy
+    return lo + int(d2.argmin())
 
 
 class PathIndex:
