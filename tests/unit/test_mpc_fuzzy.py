@@ -152,3 +152,18 @@ def _source_env() -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(src), env.get("PYTHONPATH", "")]))
     return env
+def test_the_compiled_lookup_is_bilinear_interpolation_of_the_surfaces(fw):
+    """``ratios`` (compiled) against scipy's linear interpolation on the same grid, inside
+    and beyond the universes (clamped to their edges)."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    s = fw.spec
+    rng = np.random.default_rng(5)
+    e_y = rng.uniform(-1.5 * s.e_y_range_m, 1.5 * s.e_y_range_m, 300)
+    e_phi = rng.uniform(-1.5 * s.e_phi_range_deg, 1.5 * s.e_phi_range_deg, 300)
+    at = np.column_stack([np.clip(e_y, -s.e_y_range_m, s.e_y_range_m),
+                          np.clip(e_phi, -s.e_phi_range_deg, s.e_phi_range_deg)])
+    got = np.array([fw.ratios(y, math.radians(p)) for y, p in zip(e_y, e_phi, strict=True)])
+    for k in range(len(OUTPUT_NAMES)):
+        oracle = RegularGridInterpolator((fw.gy, fw.gp), fw.surfaces[k])
+        np.testing.assert_allclose(got[:, k], oracle(at), rtol=0, atol=1e-12)

@@ -105,3 +105,26 @@ def test_bad_arrays_raise_naming_them():
         Reference.from_arrays([0, 1], [0, float("nan")], [0, 0], [0, 0], [1, 1])
     with pytest.raises(ValueError, match="distinct"):
         Reference.from_arrays([0, 0], [0, 0], [0, 0], [0, 0], [1, 1])
+
+
+@pytest.mark.parametrize("frame", ["path", "global"])
+@pytest.mark.parametrize("start", [30.0, 190.0, -3.0])     # inside; running off the end; before
+def test_the_compiled_horizon_is_the_sampled_path(frame, start):
+    """``horizon`` (compiled) against :meth:`Reference.sample` (numpy's interpolation and the
+    straight continuation beyond the ends), on a circle's arc whose ends are curved."""
+    ref = _circle(R=40.0, n=801, turns=0.75)
+    s0 = min(max(start, 0.0), ref.length)
+    x0, y0, yaw0, _, _ = ref.sample(np.array([s0]))
+    near = ref.nearest(float(x0[0]) + 0.3, float(y0[0]) - 0.2)
+    v, dt, n_p = 15.0, 0.01, 40
+    phi_ref, y_ref = ref.horizon(near, v, dt, n_p, vehicle_yaw=near.yaw + 2 * math.pi,
+                                 frame=frame)
+    x, y, yaw, _, _ = ref.sample(near.s + v * dt * np.arange(1, n_p + 1))
+    if frame == "path":
+        c, s = math.cos(near.yaw), math.sin(near.yaw)
+        np.testing.assert_allclose(phi_ref, yaw - near.yaw, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(y_ref, -s * (x - near.x) + c * (y - near.y), rtol=0,
+                                   atol=1e-12)
+    else:
+        np.testing.assert_allclose(phi_ref, yaw + 2 * math.pi, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(y_ref, y, rtol=0, atol=1e-12)
