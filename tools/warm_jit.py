@@ -5,12 +5,17 @@ source tree (unit tests) and the colcon install (nodes, ``fourws``) each have th
 ``make setup`` runs this once with each on the path; a short closed loop of each kind of
 preset (MPC with the terminal cost on both levels and on Y's alone, MPC without it, as the
 paper's cost and the fallback when the DARE fails, LQR) reaches every kernel with the types
-the runs use. Usage: ``python tools/warm_jit.py``.
+the runs use. numba checks only a kernel's own file for staleness, so when any source of the
+packages changed since the last warm-up every cached kernel of theirs is deleted first
+(:func:`drop_stale_caches`). Usage: ``python tools/warm_jit.py``.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib
 import time
+from pathlib import Path
 
 import fourws_common  # noqa: F401 - first: the BLAS thread default
 from fourws_bringup.core.closed_loop import run_closed_loop
@@ -38,8 +43,38 @@ def _warm_evidence() -> None:
         raise RuntimeError("warm_jit: the saturating state gave no evidence")
 
 
+#: the packages whose kernels call each other (a kernel may inline another file's function)
+PACKAGES = ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", "fourws_bringup")
+#: where the sources' fingerprint of the last warm-up is kept, beside the caches it vouches for
+STAMP = "__pycache__/fourws_kernel_sources.sha256"
+
+
+def drop_stale_caches() -> int:
+    """numba checks only a kernel's own file for staleness, not the files of the functions
+    it calls (``qp._build`` calls ``condense``; docs/architecture.md, "Compiled numerics").
+    If any source of the packages on the path changed since the last warm-up, delete every
+    cached kernel of theirs so that all compile afresh; returns how many files went."""
+    dirs = [Path(importlib.import_module(name).__file__).parent for name in PACKAGES]
+    digest = hashlib.sha256()
+    for d in dirs:
+        for f in sorted(d.rglob("*.py")):
+            digest.update(str(f.relative_to(d.parent)).encode() + b"\0" + f.read_bytes())
+    stamp = dirs[0] / STAMP
+    if stamp.is_file() and stamp.read_text(encoding="utf-8") == digest.hexdigest():
+        return 0
+    gone = 0
+    for d in dirs:
+        for f in [*d.rglob("*.nbi"), *d.rglob("*.nbc")]:
+            f.unlink(missing_ok=True)
+            gone += 1
+    stamp.parent.mkdir(exist_ok=True)
+    stamp.write_text(digest.hexdigest(), encoding="utf-8")
+    return gone
+
+
 def main() -> int:
     t0 = time.perf_counter()
+    dropped = drop_stale_caches()
     realistic = load_condition("realistic", 0)
     for scenario, controller, overrides in RUNS:
         run_closed_loop(scenario, controller, max_steps=3, mpc_overrides=overrides)
@@ -49,7 +84,8 @@ def main() -> int:
     import fourws_sim
 
     print(f"[setup] numba kernels ready for {fourws_sim.__file__.rsplit('/', 2)[0]} "
-          f"({time.perf_counter() - t0:.1f} s)")
+          f"({time.perf_counter() - t0:.1f} s"
+          f"{f'; sources changed: {dropped} cached files recompiled' if dropped else ''})")
     return 0
 
 

@@ -19,6 +19,7 @@ from fourws_mpc.core.grip import (
     GripEstimator,
     GripMemory,
     GripSettings,
+    lateral_use,
     peak_slips,
     steer_window,
     yaw_moment_bound,
@@ -335,6 +336,26 @@ def test_the_yaw_moment_bound_is_the_spare_longitudinal_grip():
     assert yaw_moment_bound(z, P, 0.5, 0.0) == pytest.approx(0.0, abs=1e-6)
     z[R_.ALPHA_F] = 0.0
     assert yaw_moment_bound(z, P, 0.5, 0.5 * 9.81) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_lateral_grip_use_is_the_magic_formula_over_its_peak():
+    """``lateral_use`` (compiled) against the Magic Formula written out: the larger of the
+    axles' |F(α̂')| / D at μ̂, at most 1."""
+    from fourws_mpc.core.friction_model import axle_loads
+
+    rng = np.random.default_rng(11)
+    c, e = P.tyre_shape_lateral, P.tyre_curvature_lateral
+    for _ in range(200):
+        mu = rng.uniform(0.2, 1.1)
+        z = np.zeros(FM.N_STATE_FRICTION)
+        z[R_.ALPHA_F], z[R_.ALPHA_R] = rng.uniform(-0.2, 0.2, 2)
+        uses = []
+        for alpha, k, fz in zip((z[R_.ALPHA_F], z[R_.ALPHA_R]), (2 * P.c_cf, 2 * P.c_cr),
+                                axle_loads(P), strict=True):
+            d = mu * fz
+            bz = k / (c * d) * alpha
+            uses.append(abs(d * math.sin(c * math.atan(bz - e * (bz - math.atan(bz))))) / d)
+        assert lateral_use(z, P, mu) == pytest.approx(min(max(uses), 1.0), rel=1e-12)
 
 
 def test_the_steer_window_is_the_peak_slip_around_the_kinematic_angle():

@@ -152,6 +152,8 @@ def _source_env() -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(src), env.get("PYTHONPATH", "")]))
     return env
+
+
 def test_the_compiled_lookup_is_bilinear_interpolation_of_the_surfaces(fw):
     """``ratios`` (compiled) against scipy's linear interpolation on the same grid, inside
     and beyond the universes (clamped to their edges)."""

@@ -107,19 +107,36 @@ def test_bad_arrays_raise_naming_them():
         Reference.from_arrays([0, 0], [0, 0], [0, 0], [0, 0], [1, 1])
 
 
+def _pose_oracle(ref, sq):
+    """x, y, yaw at ``sq`` written out with numpy: interpolation, and beyond each end the end
+    heading continued straight."""
+    s = ref.s
+    x, y, yaw = (np.interp(sq, s, a) for a in (ref.x, ref.y, ref.yaw))
+    for out, end in ((sq > s[-1], -1), (sq < s[0], 0)):
+        d = sq - s[end]
+        x = np.where(out, ref.x[end] + d * math.cos(ref.yaw[end]), x)
+        y = np.where(out, ref.y[end] + d * math.sin(ref.yaw[end]), y)
+    return x, y, yaw
+
+
 @pytest.mark.parametrize("frame", ["path", "global"])
-@pytest.mark.parametrize("start", [30.0, 190.0, -3.0])     # inside; running off the end; before
-def test_the_compiled_horizon_is_the_sampled_path(frame, start):
-    """``horizon`` (compiled) against :meth:`Reference.sample` (numpy's interpolation and the
-    straight continuation beyond the ends), on a circle's arc whose ends are curved."""
+@pytest.mark.parametrize("behind", [-30.0, -190.0, 2.0])   # inside; off the end; before start
+def test_the_compiled_horizon_is_the_sampled_path(frame, behind):
+    """``horizon`` (compiled) against the path sampled with numpy, on a circle's arc whose
+    ends are curved: inside, running off the end, and from a car behind the start (the first
+    points lie before it)."""
     ref = _circle(R=40.0, n=801, turns=0.75)
-    s0 = min(max(start, 0.0), ref.length)
-    x0, y0, yaw0, _, _ = ref.sample(np.array([s0]))
-    near = ref.nearest(float(x0[0]) + 0.3, float(y0[0]) - 0.2)
+    s0 = -behind if behind < 0 else 0.0
+    x0, y0, _, _, _ = ref.sample(np.array([s0]))
+    if behind > 0:                                    # the start heads along +X
+        x0 = x0 - behind
+    near = ref.nearest(float(x0[0]), float(y0[0]) - 0.2)
     v, dt, n_p = 15.0, 0.01, 40
+    sq = near.s + v * dt * np.arange(1, n_p + 1)
+    assert (sq.min() < 0.0) == (behind > 0) and (sq.max() > ref.length) == (behind < -100)
     phi_ref, y_ref = ref.horizon(near, v, dt, n_p, vehicle_yaw=near.yaw + 2 * math.pi,
                                  frame=frame)
-    x, y, yaw, _, _ = ref.sample(near.s + v * dt * np.arange(1, n_p + 1))
+    x, y, yaw = _pose_oracle(ref, sq)
     if frame == "path":
         c, s = math.cos(near.yaw), math.sin(near.yaw)
         np.testing.assert_allclose(phi_ref, yaw - near.yaw, rtol=0, atol=1e-15)

@@ -330,3 +330,22 @@ def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch, con
     worst = max(np.max(np.abs(W - T.terminal_weight(Ak, Bk, en, q, r))) / np.max(np.abs(W))
                 for Ak, Bk, en, q, r, W, _ in used)
     assert worst <= 1e-9
+
+
+@pytest.mark.parametrize("A, B, Q, R", [
+    # a slow mode weakly weighted and weakly reached (closed loop ≈ 0.999): slow linear phase
+    (np.diag([0.999, 0.5]), np.array([[1e-3], [1.0]]), np.diag([1e-6, 1.0]), np.eye(1)),
+    # a double integrator with a dear input: a sluggish, lightly damped closed loop
+    (np.array([[1.0, 0.01], [0.0, 1.0]]), np.array([[0.0], [0.01]]), np.diag([1.0, 0.0]),
+     1e4 * np.eye(1)),
+    (np.diag([0.9999, 0.3]), np.array([[1e-4], [1.0]]), np.diag([1e-3, 1.0]), np.eye(1)),
+])
+def test_the_doubling_stops_only_once_it_converges_quadratically(A, B, Q, R):
+    """The stopping rule that trusts the quadratic regime (change ≤ √rtol while the change
+    fell a thousandfold) returns what the doubling run to a change of 1e-26 returns, on
+    closed loops whose slow modes converge linearly for several doublings first."""
+    P = T.solve_dare(A, B, Q, R)
+    strict, ok = T._sda(A, B, Q, R, 1e-26, 60)
+    assert ok
+    np.testing.assert_allclose(P, strict, rtol=0, atol=1e-13 * np.abs(strict).max())
+    assert _dare_residual(A, B, Q, R, P) < 1e-13

@@ -192,7 +192,8 @@ class MpcResult:
 @njit(cache=True)
 def _clamp_enabled(u: np.ndarray, enabled: np.ndarray, lo: np.ndarray, hi: np.ndarray
                    ) -> np.ndarray:
-    """u clipped to [lo, hi] per input, 0 where the input is disabled (a new array)."""
+    """u clipped to [lo, hi] per input, 0 where the input is disabled (a new array; u
+    finite, lo ≤ hi)."""
     out = np.zeros(u.shape[0])
     for i in range(u.shape[0]):
         if enabled[i]:
@@ -298,9 +299,7 @@ class MpcController:
             return
         self.cfg = cfg
         self._apply(cfg, old)
-        self.u_prev = np.where(self._enabled,
-                               np.minimum(np.maximum(self.u_prev, -self._u_max), self._u_max),
-                               0.0)
+        self.u_prev = _clamp_enabled(self.u_prev, self._enabled, -self._u_max, self._u_max)
         if cfg.horizons_mode == "apcha":
             self.n_p = min(max(self.n_p, cfg.np_min), cfg.np_max)
             self.n_c = min(max(self.n_c, cfg.nc_min), cfg.nc_max, self.n_p)
@@ -339,8 +338,10 @@ class MpcController:
         if self._stepped:
             self.qp = self._new_qp(self.cfg, self.qp.settings)
             self._stepped = False
-        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).copy()
-        self.u_prev = np.where(self._enabled, np.clip(u, -self._u_max, self._u_max), 0.0)
+        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).reshape(N_INPUT)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"u_prev: not finite ({u_prev!r})")
+        self.u_prev = _clamp_enabled(u, self._enabled, -self._u_max, self._u_max)
         self.sent = CommandBuffer(self._n_delay, self.u_prev)
         self.du_last = np.zeros(N_INPUT)
         self.plan_u: np.ndarray | None = None

@@ -84,8 +84,8 @@ def _expm(A: np.ndarray, theta: np.ndarray, b3: np.ndarray,
             s = int(np.ceil(np.log2(norm / theta[4])))
         U, V = _pade13(A / 2.0 ** s, b13)
     E = V + U
-    if not solve_into(V - U, E):       # (V − U)⁻¹ (V + U); singular only for a NaN A
-        E[:, :] = np.nan
+    if not solve_into(V - U, E):       # (V − U)⁻¹ (V + U); a NaN A gives NaN through it
+        E[:, :] = np.nan                # an exactly singular V − U: no exponential
 
     for _ in range(s):
         E = E @ E

@@ -228,18 +228,21 @@ class FuzzyWeights:
     def ratios(self, e_y_m: float, e_phi_rad: float) -> np.ndarray:
         """The four ratios (r_QY, r_Qφ, r_RΔδ, r_RΔMz) at (e_Y m, e_φ rad), shape (4,)."""
         s = self.spec
+        if math.isnan(e_y_m) or math.isnan(e_phi_rad):
+            raise ValueError(f"fuzzy weights: NaN error (e_Y {e_y_m!r}, e_φ {e_phi_rad!r})")
         return _bilinear(self.surfaces, float(e_y_m), math.degrees(e_phi_rad), s.e_y_range_m,
                          s.e_phi_range_deg, self._hy, self._hp)
 
 
 @njit(cache=True)
-def _bilinear(surfaces: np.ndarray, e_y: float, e_phi_deg: float, range_y: float,
-              range_phi: float, h_y: float, h_phi: float) -> np.ndarray:
+def _bilinear(surfaces: np.ndarray, e_y_m: float, e_phi_deg: float, range_y_m: float,
+              range_phi_deg: float, h_y_m: float, h_phi_deg: float) -> np.ndarray:
     """:meth:`FuzzyWeights.ratios`, compiled: the four surfaces (4, n_y, n_φ) on their
-    uniform grid, interpolated bilinearly at the clamped errors."""
+    uniform grid (steps h), interpolated bilinearly at the errors clamped to the ranges (not
+    NaN: the caller checks)."""
     n_y, n_phi = surfaces.shape[1], surfaces.shape[2]
-    fy = (min(max(e_y, -range_y), range_y) + range_y) / h_y
-    fp = (min(max(e_phi_deg, -range_phi), range_phi) + range_phi) / h_phi
+    fy = (min(max(e_y_m, -range_y_m), range_y_m) + range_y_m) / h_y_m
+    fp = (min(max(e_phi_deg, -range_phi_deg), range_phi_deg) + range_phi_deg) / h_phi_deg
     iy = min(int(fy), n_y - 2)
     ip = min(int(fp), n_phi - 2)
     ty = fy - iy

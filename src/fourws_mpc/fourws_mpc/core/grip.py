@@ -210,11 +210,13 @@ def lateral_use(zeta: np.ndarray, p: ModelParams, mu: float) -> float:
 
 
 @njit(cache=True)
-def _lateral_use(alpha_f: float, alpha_r: float, k_f: float, k_r: float, d_f: float,
-                 d_r: float, c: float, e: float) -> float:
+def _lateral_use(alpha_f_rad: float, alpha_r_rad: float, k_f_n_per_rad: float,
+                 k_r_n_per_rad: float, d_f_n: float, d_r_n: float, c: float, e: float
+                 ) -> float:
     """:func:`lateral_use` of the axles' slips α̂', stiffnesses K and peaks D, compiled."""
     use = 0.0
-    for alpha, k, d in ((alpha_f, k_f, d_f), (alpha_r, k_r, d_r)):
+    for alpha, k, d in ((alpha_f_rad, k_f_n_per_rad, d_f_n), (alpha_r_rad, k_r_n_per_rad,
+                                                              d_r_n)):
         use = max(use, abs(force(alpha, k, d, c, e)[0]) / d)
     return min(use, 1.0)
 

@@ -475,7 +475,12 @@ class MpcQp:
                          en, f(lower), f(bounds.u_max), band, float(bounds.vy_max),
                          float(bounds.r_max), bool(bounds.state_bounds),
                          int(bounds.state_bounds_from_step), float(bounds.state_softness))
-        warm = None if warm_du_scaled is None else _warm_start(f(warm_du_scaled).reshape(-1), en)
+        warm = None
+        if warm_du_scaled is not None:
+            if np.size(warm_du_scaled) != en.shape[0]:
+                raise ValueError(f"warm_du_scaled: {np.size(warm_du_scaled)} values, the QP "
+                                 f"has {en.shape[0]} increments (N_c {n_c} x {nu})")
+            warm = _warm_start(f(warm_du_scaled).reshape(-1), en)
         res = self.solver.solve(CondensedQp(inst.pattern, H, 2.0 * rho, qvec, inst.A, inst.lo,
                                             inst.hi), warm)
         inst.uses += 1

@@ -155,24 +155,10 @@ class Reference:
         """
         sq = np.asarray(s_query, float)
         s = self.s
-        x = np.interp(sq, s, self.x)
-        y = np.interp(sq, s, self.y)
-        yaw = np.interp(sq, s, self.yaw)
-        kappa = np.interp(sq, s, self.curvature)
-        v = np.interp(sq, s, self.speed)
-        over = sq > s[-1]
-        under = sq < s[0]
-        if np.any(over):
-            d = sq - s[-1]
-            x = np.where(over, self.x[-1] + d * math.cos(self.yaw[-1]), x)
-            y = np.where(over, self.y[-1] + d * math.sin(self.yaw[-1]), y)
-            kappa = np.where(over, 0.0, kappa)
-        if np.any(under):
-            d = sq - s[0]
-            x = np.where(under, self.x[0] + d * math.cos(self.yaw[0]), x)
-            y = np.where(under, self.y[0] + d * math.sin(self.yaw[0]), y)
-            kappa = np.where(under, 0.0, kappa)
-        return x, y, yaw, kappa, v
+        x, y, yaw = (a.reshape(sq.shape) for a in _pose_at(s, self.x, self.y, self.yaw,
+                                                             np.ascontiguousarray(sq.ravel())))
+        kappa = np.where((sq > s[-1]) | (sq < s[0]), 0.0, np.interp(sq, s, self.curvature))
+        return x, y, yaw, kappa, np.interp(sq, s, self.speed)
 
     def horizon(self, near: NearestPoint, vx: float, dt_s: float, n_p: int,
                 vehicle_yaw: float, frame: str = "path") -> tuple[np.ndarray, np.ndarray]:
@@ -183,9 +169,12 @@ class Reference:
         """
         if frame not in ("path", "global"):
             raise ValueError(f"frame: '{frame}' is not one of ['path', 'global']")
+        # global: φ_ref within π of the vehicle's yaw (a NaN yaw raises here)
+        shift = (0.0 if frame == "path"
+                 else TWO_PI * round((vehicle_yaw - near.yaw) / TWO_PI))
         return _horizon(self.s, self.x, self.y, self.yaw, float(near.s), float(near.x),
                         float(near.y), float(near.yaw), max(float(vx), 0.0) * float(dt_s),
-                        int(n_p), frame == "path", float(vehicle_yaw))
+                        int(n_p), frame == "path", shift)
 
     def to_path_frame(self, near: NearestPoint, px: float, py: float, yaw: float
                       ) -> tuple[float, float, float]:
@@ -222,8 +211,8 @@ def _project(xs: np.ndarray, ys: np.ndarray, px: float, py: float, lo: int, hi: 
 @njit(cache=True)
 def _pose_at(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray,
              sq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """x, y, yaw at the arc lengths ``sq`` (as :meth:`Reference.sample`: linear
-    interpolation inside, the end headings continued straight beyond the ends)."""
+    """x, y, yaw at the arc lengths ``sq`` (:meth:`Reference.sample`'s pose): linear
+    interpolation inside, the end headings continued straight beyond the ends."""
     x = np.interp(sq, s, xs)
     y = np.interp(sq, s, ys)
     yaw = np.interp(sq, s, yaws)
@@ -243,10 +232,10 @@ def _pose_at(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray,
 @njit(cache=True)
 def _horizon(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray, s0: float,
              x0: float, y0: float, yaw0: float, ds: float, n_p: int, path_frame: bool,
-             vehicle_yaw: float) -> tuple[np.ndarray, np.ndarray]:
+             shift: float) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`Reference.horizon`, compiled: the poses at s0 + ds i, i = 1..N_p, as (φ_ref,
-    Y_ref) in the path frame at (x0, y0, yaw0), or in the map frame with φ_ref within π of
-    ``vehicle_yaw``."""
+    Y_ref) in the path frame at (x0, y0, yaw0), or in the map frame with φ_ref shifted by
+    ``shift`` (a whole number of turns)."""
     sq = np.empty(n_p)
     for i in range(n_p):
         sq[i] = s0 + ds * (i + 1)
@@ -254,5 +243,4 @@ def _horizon(s: np.ndarray, xs: np.ndarray, ys: np.ndarray, yaws: np.ndarray, s0
     if path_frame:
         c, sn = math.cos(yaw0), math.sin(yaw0)
         return yaw - yaw0, -sn * (x - x0) + c * (y - y0)
-    shift = TWO_PI * round((vehicle_yaw - yaw0) / TWO_PI)
     return yaw + shift, y

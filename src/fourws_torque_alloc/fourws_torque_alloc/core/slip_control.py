@@ -52,6 +52,10 @@ class WheelMotion:
                    float(state.steer_front), float(state.steer_rear))
 
 
+#: per wheel (``Wheel`` order): whether it is steered by the front angle
+_FRONT = tuple(w in (Wheel.FL, Wheel.FR) for w in Wheel)
+
+
 def wheel_slip(m: WheelMotion, a_m: float, b_m: float, track_m: float, radius_m: float,
                v_min_mps: float) -> tuple[np.ndarray, np.ndarray]:
     """(κ (4,), v (4,) m/s): each wheel's longitudinal slip and its centre's speed along its
@@ -59,7 +63,7 @@ def wheel_slip(m: WheelMotion, a_m: float, b_m: float, track_m: float, radius_m:
     # per wheel, in the order of ``Wheel`` (FL FR RL RR): position and road-wheel angle
     x = (a_m, a_m, -b_m, -b_m)
     y = (0.5 * track_m, -0.5 * track_m, 0.5 * track_m, -0.5 * track_m)
-    d = (m.steer_front_rad, m.steer_front_rad, m.steer_rear_rad, m.steer_rear_rad)
+    d = tuple(m.steer_front_rad if front else m.steer_rear_rad for front in _FRONT)
     v = [(m.vx_mps - m.yaw_rate_rad_s * y[i]) * math.cos(d[i])
          + (m.vy_mps + m.yaw_rate_rad_s * x[i]) * math.sin(d[i]) for i in range(len(Wheel))]
     kappa = [(m.wheel_speed_rad_s[i] * radius_m - v[i]) / max(abs(v[i]), v_min_mps)
