@@ -256,27 +256,13 @@ class QpLayout:
 
     def __init__(self, n_p: int, n_c: int) -> None:
         self.n_p, self.n_c = n_p, n_c
-        nu = N_INPUT
-        nz = nu * n_c + 1
-        self.nz = nz
-        # P pattern: full upper triangle of the ΔŨ block, plus the slack diagonal
-        iu, ju = np.triu_indices(nu * n_c)
-        p_rows, p_cols = _csc_order(np.concatenate([iu, [nz - 1]]),
-                                    np.concatenate([ju, [nz - 1]]))
-        mask = self._a_mask()
-        a_rows, a_cols = _csc_order(*np.nonzero(mask))
-        self.m = mask.shape[0]
-        # rows 0..nz−1 are I: the Δũ box and ε ≥ 0 (bounds on z itself)
-        self.pattern = QpPattern((n_p, n_c), nz, self.m, p_rows, p_cols, a_rows, a_cols,
-                                 simple=nz)
+        self.pattern, a0 = _structure(n_p, n_c)
+        self.nz, self.m = self.pattern.nz, self.pattern.m
+        self.ncol = self.nz - 1
         self.uses = 0
         # the dense constraint matrix (rows as in _a_mask): the Δũ box and ε rows are
         # constant, the others refilled every step (condense.constraints)
-        ncol = nu * n_c
-        self.ncol = ncol
-        self.A = np.zeros((self.m, ncol + 1))
-        self.A[:ncol, :ncol] = np.eye(ncol)
-        self.A[ncol, ncol] = 1.0
+        self.A = a0.copy()
         self.lo = np.empty(self.m)
         self.hi = np.empty(self.m)
         self._tiled_key: tuple | None = None
@@ -294,21 +280,52 @@ class QpLayout:
         return self._tiled  # type: ignore[return-value]
 
     def _a_mask(self) -> np.ndarray:
-        n_p, n_c, nu = self.n_p, self.n_c, N_INPUT
-        ncol = nu * n_c
-        # block-triangular pattern of Θ in time (step i reaches increments j ≤ i−1)
-        step_mask = (np.arange(n_p)[:, None] >= np.arange(n_c)[None, :])
-        th2 = np.repeat(np.repeat(step_mask, 2, axis=0), nu, axis=1)       # 2 rows per step
-        cum = np.kron(np.tril(np.ones((n_c, n_c), bool)), np.eye(nu, dtype=bool))
-        eye = np.eye(ncol, dtype=bool)
-        z = np.zeros
-        top = np.hstack([eye, z((ncol, 1), bool)])
-        eps_row = np.hstack([z((1, ncol), bool), np.ones((1, 1), bool)])
-        ub = np.hstack([cum, z((ncol, 1), bool)])
-        # the v_y and r bounds: an upper and a lower row each, with the slack column (its
-        # coefficient is 0 while the bounds are hard)
-        soft = np.hstack([th2, np.ones((2 * n_p, 1), bool)])
-        return np.vstack([top, eps_row, ub, soft, soft, soft, soft])
+        """Which entries of A may be non-zero (:func:`_constraint_mask`)."""
+        return _constraint_mask(self.n_p, self.n_c)
+
+
+def _constraint_mask(n_p: int, n_c: int) -> np.ndarray:
+    """Which entries of the constraint matrix of (N_p, N_c) may be non-zero, rows in the
+    order of :class:`QpLayout` (Δũ box, ε, u bounds, v_y and r above and below, φ and Y
+    above and below)."""
+    nu = N_INPUT
+    ncol = nu * n_c
+    # block-triangular pattern of Θ in time (step i reaches increments j ≤ i−1)
+    step_mask = (np.arange(n_p)[:, None] >= np.arange(n_c)[None, :])
+    th2 = np.repeat(np.repeat(step_mask, 2, axis=0), nu, axis=1)       # 2 rows per step
+    cum = np.kron(np.tril(np.ones((n_c, n_c), bool)), np.eye(nu, dtype=bool))
+    eye = np.eye(ncol, dtype=bool)
+    z = np.zeros
+    top = np.hstack([eye, z((ncol, 1), bool)])
+    eps_row = np.hstack([z((1, ncol), bool), np.ones((1, 1), bool)])
+    ub = np.hstack([cum, z((ncol, 1), bool)])
+    # the v_y and r bounds: an upper and a lower row each, with the slack column (its
+    # coefficient is 0 while the bounds are hard)
+    soft = np.hstack([th2, np.ones((2 * n_p, 1), bool)])
+    return np.vstack([top, eps_row, ub, soft, soft, soft, soft])
+
+
+@lru_cache(maxsize=256)
+def _structure(n_p: int, n_c: int) -> tuple[QpPattern, np.ndarray]:
+    """The sparsity pattern of (N_p, N_c) and its constraint matrix's constant rows (the rest
+    zero), built once per pair in a process (read-only; every :class:`QpLayout` copies the
+    matrix): a controller sets up every reachable pair, and a sweep builds one per run."""
+    nu = N_INPUT
+    ncol = nu * n_c
+    nz = ncol + 1
+    # P pattern: full upper triangle of the ΔŨ block, plus the slack diagonal
+    iu, ju = np.triu_indices(ncol)
+    p_rows, p_cols = _csc_order(np.concatenate([iu, [nz - 1]]), np.concatenate([ju, [nz - 1]]))
+    mask = _constraint_mask(n_p, n_c)
+    a_rows, a_cols = _csc_order(*np.nonzero(mask))
+    # rows 0..nz−1 are I: the Δũ box and ε ≥ 0 (bounds on z itself)
+    a0 = np.zeros((mask.shape[0], nz))
+    a0[:ncol, :ncol] = np.eye(ncol)
+    a0[ncol, ncol] = 1.0
+    for arr in (p_rows, p_cols, a_rows, a_cols, a0):
+        arr.flags.writeable = False
+    return QpPattern((n_p, n_c), nz, mask.shape[0], p_rows, p_cols, a_rows, a_cols,
+                     simple=nz), a0
 
 
 def _terminal(terminal_w: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
