@@ -5,9 +5,9 @@ source tree (unit tests) and the colcon install (nodes, ``fourws``) each have th
 ``make setup`` runs this once with each on the path; a short closed loop of each kind of
 preset (MPC with the terminal cost on both levels and on Y's alone, MPC without it, as the
 paper's cost and the fallback when the DARE fails, LQR) reaches every kernel with the types
-the runs use. numba checks only a kernel's own file for staleness, so when any source of the
-packages changed since the last warm-up every cached kernel of theirs is deleted first
-(:func:`drop_stale_caches`). Usage: ``python tools/warm_jit.py``.
+the runs use. numba checks only a kernel's own file for staleness, so when any kernel source
+(every ``core/`` and ``fourws_common``) changed since the last warm-up every cached kernel is
+deleted first (:func:`drop_stale_caches`). Usage: ``python tools/warm_jit.py``.
 """
 
 from __future__ import annotations
@@ -49,15 +49,21 @@ PACKAGES = ("fourws_common", "fourws_sim", "fourws_mpc", "fourws_torque_alloc", 
 STAMP = "__pycache__/fourws_kernel_sources.sha256"
 
 
+def kernel_sources(d: Path) -> list[Path]:
+    """The files of package folder ``d`` that kernels are compiled from: its ``core/``, and
+    the whole of ``fourws_common`` (``load_transfer`` is compiled by its users)."""
+    return sorted(d.rglob("*.py") if d.name == "fourws_common" else (d / "core").glob("*.py"))
+
+
 def drop_stale_caches() -> int:
     """numba checks only a kernel's own file for staleness, not the files of the functions
     it calls (``qp._build`` calls ``condense``; docs/architecture.md, "Compiled numerics").
-    If any source of the packages on the path changed since the last warm-up, delete every
-    cached kernel of theirs so that all compile afresh; returns how many files went."""
+    If any kernel source of the packages on the path changed since the last warm-up, delete
+    every cached kernel of theirs so that all compile afresh; returns how many files went."""
     dirs = [Path(importlib.import_module(name).__file__).parent for name in PACKAGES]
     digest = hashlib.sha256()
     for d in dirs:
-        for f in sorted(d.rglob("*.py")):
+        for f in kernel_sources(d):
             digest.update(str(f.relative_to(d.parent)).encode() + b"\0" + f.read_bytes())
     stamp = dirs[0] / STAMP
     if stamp.is_file() and stamp.read_text(encoding="utf-8") == digest.hexdigest():
