@@ -339,11 +339,14 @@ def test_across_a_run_the_reused_cost_to_go_equals_a_full_solve(monkeypatch, con
     (np.array([[1.0, 0.01], [0.0, 1.0]]), np.array([[0.0], [0.01]]), np.diag([1.0, 0.0]),
      1e4 * np.eye(1)),
     (np.diag([0.9999, 0.3]), np.array([[1e-4], [1.0]]), np.diag([1e-3, 1.0]), np.eye(1)),
+    # a slow mode Q barely weighs beside a fast one (a review's counter-examples)
+    (np.diag([0.0, 0.9999]), np.array([[1.0], [1e-4]]), np.diag([1.0, 1e-8]), np.eye(1)),
+    (np.diag([0.5, 0.9999]), np.array([[1.0], [1e-4]]), np.diag([1.0, 1e-10]), np.eye(1)),
 ])
-def test_the_doubling_stops_only_once_it_converges_quadratically(A, B, Q, R):
-    """The stopping rule that trusts the quadratic regime (change ≤ √rtol while the change
-    fell a thousandfold) returns what the doubling run to a change of 1e-26 returns, on
-    closed loops whose slow modes converge linearly for several doublings first."""
+def test_the_doubling_stops_only_once_it_converged(A, B, Q, R):
+    """The doubling stops where a doubling run to a change of 1e-26 ends, on closed loops
+    whose slow modes, weakly weighted or weakly reached, move P little per doubling long
+    before they converge."""
     P = T.solve_dare(A, B, Q, R)
     strict, ok = T._sda(A, B, Q, R, 1e-26, 60)
     assert ok

@@ -335,12 +335,12 @@ class MpcController:
         """Forget the past: u(k−1) (default zeros), plan, horizons, reference index, and the
         solver's internal state (OSQP keeps its adapted ρ and duals between solves), so a
         reset controller answers exactly as a new one."""
+        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).reshape(N_INPUT)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"u_prev: not finite ({u_prev!r}); nothing was reset")
         if self._stepped:
             self.qp = self._new_qp(self.cfg, self.qp.settings)
             self._stepped = False
-        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).reshape(N_INPUT)
-        if not np.all(np.isfinite(u)):
-            raise ValueError(f"u_prev: not finite ({u_prev!r})")
         self.u_prev = _clamp_enabled(u, self._enabled, -self._u_max, self._u_max)
         self.sent = CommandBuffer(self._n_delay, self.u_prev)
         self.du_last = np.zeros(N_INPUT)
