@@ -189,7 +189,8 @@ def page(rows: list[dict], figs: list[str]) -> str:
         "run in the ideal world. Nothing in it is tuned.",
         "",
         "## What it runs",
-        "Every preset on the tanh double lane change at 60 km/h, stretched to a ladder of "
+        "The paper's five presets and `lqr_ff` (not `improved_np30`) on the tanh double lane "
+        "change at 60 km/h, stretched to a ladder of "
         "0.6-1.3 μg peak demand on μ 0.5 and 0.9; ISO 3888-1 at 60-80 km/h and ISO 3888-2 "
         "(obstacle avoidance, lane widths from the car's 1.5 m width as the standard gives "
         "them, cones as lane boundaries) at 30-45 km/h on μ 0.9, speed held; a split-μ lane "
