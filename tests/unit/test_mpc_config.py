@@ -112,7 +112,8 @@ def test_presets_share_one_cost_scaling_and_constraints():
 @pytest.mark.parametrize("key,value", [
     ("rho", -1.0), ("scale_y_m", 0.0), ("weights_mode", "neural"), ("np_baseline", 2.5),
     ("use_dyc", "yes"), ("max_dsteer_front_deg", 0.0), ("apcha_lambda", 1.0),
-    ("apcha_nc_base", "x"), ("qp_max_iter", 1),
+    ("apcha_nc_base", "x"), ("qp_max_iter", 1), ("np_baseline", math.inf),
+    ("nc_baseline", math.nan),
 ])
 def test_bad_parameter_raises_naming_it(key, value):
     with pytest.raises(ValueError, match=key):
@@ -124,6 +125,8 @@ def test_bad_parameter_raises_naming_it(key, value):
     ({"nc_min": 8, "nc_max": 4}, "nc_min, nc_max"),
     ({"np_baseline": 5, "nc_baseline": 6, "horizons_mode": "fixed"}, "nc_baseline"),
     ({"np_baseline": 40}, "np_baseline"),
+    ({"terminal_cost": "lqr", "horizons_mode": "fixed", "np_baseline": 1, "nc_baseline": 1},
+     "terminal_cost"),
 ])
 def test_cross_field_rules_name_the_fields(values, names):
     with pytest.raises(ValueError, match=names):

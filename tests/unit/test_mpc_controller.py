@@ -304,3 +304,31 @@ def test_an_injected_solver_is_reset_with_the_controller():
     assert again == first
     fresh = MpcController(_cfg(qp_solver="osqp"))
     assert [fresh.step(0.01 * k, s, ref).delta_front for k, s in enumerate(states)] == first
+
+
+def test_a_config_that_fails_to_apply_changes_nothing(monkeypatch):
+    """update_config builds what can raise (the solver, the model, the fuzzy surfaces) before
+    it commits: when that fails, the controller keeps its config and answers as before."""
+    import fourws_mpc.core.controller as C
+
+    cfg = _cfg()
+    states, ref = _states(), _straight()
+    base = _answers(MpcController(cfg), states, ref)
+    ctrl = MpcController(cfg)
+    _answers(ctrl, states[:30], ref)
+    model, qp = ctrl.model, ctrl.qp
+
+    def broken(*_a, **_k):
+        raise ImportError("no such solver here")
+
+    monkeypatch.setattr(C, "make_qp_solver", broken)
+    other = MpcConfig(**{**vars(cfg), "qp_solver": "osqp",
+                         "prediction_model": "single_track_actuators"})
+    with pytest.raises(ImportError):
+        ctrl.update_config(other)
+    assert ctrl.cfg == cfg and ctrl.model is model and ctrl.qp is qp
+    monkeypatch.undo()
+    ctrl.update_config(cfg)                  # an equal config: a no-op
+    rest = [ctrl.step(0.01 * k, s, ref) for k, s in enumerate(states[30:], start=30)]
+    assert [(r.delta_front, r.delta_rear, r.yaw_moment) for r in rest] == \
+        [(b[0], b[1], b[2]) for b in base[30:]]

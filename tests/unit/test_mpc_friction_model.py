@@ -2,6 +2,7 @@
 against the plant's Magic Formula, exact Jacobians, the linear limit, the friction ellipse,
 the μ estimate, and the controller's grip envelope."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -406,18 +407,23 @@ def test_the_controller_keeps_its_commands_inside_the_grip_envelope():
     assert not res.fallback
 
 
-@pytest.mark.parametrize("ay,seen", [(4.0, 4.0), (-150.0, -1.2 * 9.81)])
-def test_the_prediction_takes_the_measured_lateral_acceleration_within_the_ceiling(ay, seen):
-    """The controller hands the prediction the measured a_y for its loads, an absurd one
-    (an IMU spike the input guard lets through) held to μ_ceiling g: the outer tyres' loads
-    stay what a road can give, and the step stays finite."""
+@pytest.mark.parametrize("ax,ay,seen_ax,seen_ay", [(0.5, 4.0, 0.5, 4.0),
+                                                   (0.5, -150.0, 0.5, -1.2 * 9.81),
+                                                   (30.0, 4.0, 1.2 * 9.81, 4.0),
+                                                   (-150.0, 0.0, -1.2 * 9.81, 0.0)])
+def test_the_prediction_takes_the_measured_accelerations_within_the_ceiling(ax, ay, seen_ax,
+                                                                            seen_ay):
+    """The controller hands the prediction the measured a_x, a_y for its loads, an absurd
+    one (an IMU spike the input guard lets through) held to μ_ceiling g: the tyres' loads
+    stay what a road can give (a 30 m/s² spike would lift a whole axle), and the step stays
+    finite."""
     cfg = MpcConfig(prediction_model="single_track_friction", terminal_cost="lqr",
                     mu_ceiling=1.2)
     ctrl = MpcController(cfg)
-    res = ctrl.step(0.0, VehicleSample(0.0, 0.1, 0.0, V, 0.0, 0.0, ax=0.5, ay=ay), _ref(),
+    res = ctrl.step(0.0, VehicleSample(0.0, 0.1, 0.0, V, 0.0, 0.0, ax=ax, ay=ay), _ref(),
                     mu=0.8)
-    assert ctrl.model.grip.ay_mps2 == pytest.approx(seen, rel=1e-12)
-    assert ctrl.model.grip.ax_mps2 == 0.5
+    assert ctrl.model.grip.ay_mps2 == pytest.approx(seen_ay, rel=1e-12)
+    assert ctrl.model.grip.ax_mps2 == pytest.approx(seen_ax, rel=1e-12)
     assert all(math.isfinite(v) for v in (res.delta_front, res.delta_rear, res.yaw_moment))
 
 
@@ -461,3 +467,15 @@ def test_the_paper_models_report_the_mu_and_bound_they_used():
     res = ctrl.step(0.01, VehicleSample(0.17, 0.1, 0.0, V, 0.0, 0.0), _ref())
     assert res.mu_estimate == cfg.mu_default
     assert ctrl._grip is None and cfg.u_max[InputIdx.MZ] == cfg.max_yaw_moment_nm
+
+
+@pytest.mark.parametrize("c,e", [(1.01, 0.0), (1.3, 0.99), (1.99, -10.0), (1.3, -0.5)])
+def test_the_peak_slip_is_the_magic_formulas_peak_anywhere_in_the_car_files_ranges(c, e):
+    """C atan φ(u*) = π/2 at u* = B α_peak, also where the root lies far out (C near 1, E
+    near 1: u* beyond 100); the peak slips follow it."""
+    from fourws_common.magic_formula import peak_argument
+    u = peak_argument(c, e)
+    assert c * math.atan(u - e * (u - math.atan(u))) == pytest.approx(math.pi / 2, rel=1e-12)
+    p = dataclasses.replace(P, tyre_shape_lateral=c, tyre_curvature_lateral=e)
+    fz_f, _ = FM.axle_loads(p)
+    assert peak_slips(p, 0.7)[0] == pytest.approx(u * c * 0.7 * fz_f / (2 * p.c_cf), rel=1e-12)

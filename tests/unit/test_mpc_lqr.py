@@ -98,3 +98,25 @@ def test_lqr_ff_respects_the_steering_actuator_limits():
     assert abs(r.delta_front) == pytest.approx(np.radians(cfg.max_dsteer_front_deg))
     ctrl.reset()
     assert np.array_equal(ctrl.u_prev, np.zeros(3))
+
+
+def test_lqr_ff_refuses_a_non_finite_previous_command_and_keeps_its_state():
+    from fourws_mpc.core.config import MpcConfig
+    from fourws_mpc.core.controller import VehicleSample
+    from fourws_mpc.core.laws import make_controller
+
+    cfg = MpcConfig(law="lqr_ff", controller="lqr_ff", use_rear_steer=False, use_dyc=False,
+                    weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False,
+                    input_delay_periods=2)
+    ctrl = make_controller(cfg)
+    x = np.linspace(0, 300, 3001)
+    ref = cfg.reference(x, np.zeros_like(x), np.zeros_like(x), np.zeros_like(x),
+                        np.full_like(x, 15.0))
+    ctrl.step(0.0, VehicleSample(0.0, 0.2, 0.0, 15.0, 0.0, 0.0), ref)
+    before = ctrl.u_prev.copy()
+    for bad in ([np.nan, 0.0, 0.0], [0.01, np.inf, 0.0], [0.0, 0.0]):
+        with pytest.raises(ValueError):
+            ctrl.reset(np.array(bad))
+        assert np.array_equal(ctrl.u_prev, before)
+    r = ctrl.step(0.01, VehicleSample(0.15, 0.2, 0.0, 15.0, 0.0, 0.0), ref)
+    assert np.isfinite(r.delta_front)

@@ -418,3 +418,42 @@ def test_the_input_level_cost_is_the_sum_of_the_held_levels_over_the_horizon():
     u_t = np.tile(u_prev, n_c)
     quad = dz @ M.T @ (w * (M @ dz)) + 2 * u_t @ (w * (M @ dz)) + u_t @ (w * u_t)
     assert quad == pytest.approx(direct, rel=1e-12)
+
+
+@pytest.mark.parametrize("bad", [
+    {"ref": np.zeros((14, 2))},             # more reference rows than N_p: past the buffers
+    {"ref": np.zeros((8, 2))},              # fewer: rows of an earlier solve would be kept
+    {"n_c": 13},                            # N_c > N_p: a negative level weight
+    {"n_c": 0},
+    {"u_prev": np.zeros(2)},
+    {"q_eff": np.ones(3)},
+    {"r_eff": np.ones(2)},
+    {"dk": np.zeros(5)},
+    {"s_level": np.ones(2)},
+    {"warm_du_scaled": np.zeros((5, 3))},
+])
+def test_a_step_of_the_wrong_shape_is_refused_before_anything_changes(bad):
+    z, u, Ak, Bk, dk = _model(4)
+    qp = Q.MpcQp(solver=S.DaqpSolver(S.QpSettings()))
+    good = dict(Ak=Ak, Bk=Bk, dk=dk, zeta0=z, u_prev=u, ref=np.zeros((12, 2)), n_p=12, n_c=6,
+                q_eff=np.array([50.0, 40.0]), r_eff=np.array([1e4, 1e4, 1e-4]), rho=1e3,
+                bounds=_bounds())
+    ok = qp.solve(**good)
+    before = dict(qp.instances)
+    with pytest.raises(ValueError):
+        qp.solve(**{**good, **bad})
+    assert qp.instances == before and qp.instance(12, 6).uses == 1
+    again = qp.solve(**good)
+    assert again.ok and np.array_equal(again.u, ok.u)
+
+
+def test_the_terminal_cost_needs_two_prediction_steps():
+    from fourws_mpc.core.terminal_cost import terminal_weight
+    z, u, Ak, Bk, dk = _model(5)
+    q, r = np.array([50.0, 40.0]), np.array([1e4, 1e4, 1e-4])
+    W = terminal_weight(Ak, Bk, np.ones(3, bool), q, r)
+    qp = Q.MpcQp(solver=S.DaqpSolver(S.QpSettings()))
+    with pytest.raises(ValueError, match="N_p >= 2"):
+        qp.solve(Ak, Bk, dk, z, u, np.zeros((1, 2)), 1, 1, q, r, 1e3, _bounds(), terminal_w=W)
+    assert qp.solve(Ak, Bk, dk, z, u, np.zeros((2, 2)), 2, 1, q, r, 1e3, _bounds(),
+                    terminal_w=W).ok

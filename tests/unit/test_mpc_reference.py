@@ -145,3 +145,10 @@ def test_the_compiled_horizon_is_the_sampled_path(frame, behind):
     else:
         np.testing.assert_allclose(phi_ref, yaw + 2 * math.pi, rtol=0, atol=1e-12)
         np.testing.assert_allclose(y_ref, y, rtol=0, atol=1e-12)
+
+
+def test_every_array_of_a_reference_is_read_only():
+    ref = _line()
+    for a in (ref.x, ref.y, ref.yaw, ref.curvature, ref.speed, ref.s):
+        with pytest.raises(ValueError):
+            a[0] = 1.0

@@ -227,3 +227,16 @@ def test_the_observers_linear_form_reproduces_the_observer():
         for j, (a_, b_, c_, d_) in enumerate(forms):
             assert c_ * m[j] + d_ * al == pytest.approx(est[j], abs=1e-12)
             m[j] = a_ * m[j] + b_ * al
+
+
+def test_the_observer_at_zero_period_holds_its_estimate():
+    """dt = 0 (x = T v_x/σ = 0): e = g = 1, the limit of the hold, not a division by zero;
+    the estimate then stays where it was."""
+    assert RM.hold_coefficients(0.0, V, P.relaxation_length_front_m) == (1.0, 1.0)
+    rng = np.random.default_rng(6)
+    z, _ = _point(rng)
+    est, mem = RM.SlipObserver(P).estimate(z[:8], None, T)
+    z2 = z.copy()
+    z2[StateIdx.VY] += 0.3
+    again, _ = RM.SlipObserver(P).estimate(z2[:8], mem, 0.0)
+    assert again == pytest.approx(est, abs=1e-15)

@@ -64,3 +64,27 @@ def test_mpc_reference_window_gives_the_full_projection_along_a_drive():
                                                              full.lateral_error)
         hint = near.index
     assert math.isfinite(near.s)
+
+
+def test_a_hint_off_the_path_searches_everything():
+    calls = []
+
+    def best(lo: int, hi: int) -> tuple[int]:
+        calls.append((lo, hi))
+        assert lo < hi, "an empty window was searched"
+        return (lo,)
+
+    for hint in (100, -1000, 15):            # far beyond the end, before the start, just beyond
+        calls.clear()
+        assert windowed_search(best, 10, hint, 5, 0) == (0,)
+        assert calls == [(0, 10)]
+
+
+def test_the_mpc_reference_projects_the_same_with_a_hint_off_its_path():
+    x = np.linspace(0.0, 10.0, 11)
+    ref = Reference.from_arrays(x, np.zeros(11), np.zeros(11), np.zeros(11), np.full(11, 5.0))
+    free = ref.nearest(8.3, 0.5)
+    for hint in (100, -1000):
+        near = ref.nearest(8.3, 0.5, hint)
+        assert near.index == free.index == 8
+        assert math.isclose(near.s, 8.3) and math.isclose(near.lateral_error, 0.5)

@@ -54,7 +54,8 @@ def check_field(cls: type, name: str, value: Any) -> Any:
             raise ValueError(f"{name}: expected a bool, got {value!r}")
         return value
     if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
+        if isinstance(value, bool) or not isinstance(value, int | float) or (
+                isinstance(value, float) and not math.isfinite(value)) or value != int(value):
             raise ValueError(f"{name}: expected an integer, got {value!r}")
         value = int(value)
     elif isinstance(default, float):

@@ -71,7 +71,6 @@ from fourws_mpc.core.qp_solver import QpSettings, QpSolver, QpStatus, make_qp_so
 from fourws_mpc.core.reference import NearestPoint, Reference
 from fourws_mpc.core.terminal_cost import TerminalWeight
 
-G = 9.81
 #: appended to the solver status when the QP was solved without the hard state bounds
 STATE_BOUNDS_DROPPED = "hard state bounds dropped (infeasible with them)"
 #: a delivered yaw moment this close to the command (N·m) is the allocator's round-off
@@ -255,36 +254,43 @@ class MpcController:
         return qp
 
     def _apply(self, c: MpcConfig, old: MpcConfig | None) -> None:
-        """Derive everything that depends on the config; rebuild only what changed."""
-        self.model = (self._injected_model if self._injected_model is not None else
-                      make_prediction_model(c.prediction_model, c.model_params(),
-                                            c.prediction_discretisation))
-        if old is not None and c.prediction_model != old.prediction_model:
-            self.model_memory = None            # another model's estimate means nothing
-        self._delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
-        self._n_delay = max(self._delays)
-        self._schedule = register_schedule(self._delays)
-        self.apcha_params = c.apcha_params()
-        if c.weights_mode != "fuzzy":
-            self.fuzzy = None
-        elif self.fuzzy is None or old is None or c.fuzzy_spec() != old.fuzzy_spec():
-            self.fuzzy = FuzzyWeights(c.fuzzy_spec())
-        settings = self._qp_settings(c)
-        if old is None or settings != self.qp.settings or c.qp_solver != old.qp_solver:
-            self.qp = self._new_qp(c, settings)
-        elif c.qp_prebuild:
-            for n_p, n_c in c.horizon_pairs():
-                self.qp.instance(n_p, n_c)
-        self._du_max = c.du_max
-        self._u_max = c.u_max
-        self._enabled = c.enabled
-        self._grip = (GripEstimator(c.model_params(), GripSettings(
+        """Derive everything that depends on the config; rebuild only what changed. What can
+        raise is built first: a config that fails here changes nothing."""
+        mp = c.model_params()
+        model = (self._injected_model if self._injected_model is not None else
+                 make_prediction_model(c.prediction_model, mp, c.prediction_discretisation))
+        keep_fuzzy = (self.fuzzy is not None and old is not None
+                      and c.fuzzy_spec() == old.fuzzy_spec())
+        fuzzy = (None if c.weights_mode != "fuzzy" else
+                 self.fuzzy if keep_fuzzy else FuzzyWeights(c.fuzzy_spec()))
+        grip = (GripEstimator(mp, GripSettings(
             prior=c.mu_default, floor=c.mu_floor, ceiling=c.mu_ceiling,
             evidence_deficit=c.mu_evidence_deficit, evidence_max_ax=c.mu_evidence_max_ax,
             evidence_min_ask=c.mu_evidence_min_ask,
             evidence_min_speed=c.mu_evidence_min_speed_mps, fall_time_s=c.mu_fall_time_s,
             rise_time_s=c.mu_rise_time_s))
-            if getattr(self.model, "grip_aware", False) else None)
+            if getattr(model, "grip_aware", False) else None)
+        delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
+        settings = self._qp_settings(c)
+        if old is None or settings != self.qp.settings or c.qp_solver != old.qp_solver:
+            qp = self._new_qp(c, settings)
+        else:
+            qp = self.qp
+            if c.qp_prebuild:
+                for n_p, n_c in c.horizon_pairs():
+                    qp.instance(n_p, n_c)
+        # commit
+        if old is not None and c.prediction_model != old.prediction_model:
+            self.model_memory = None            # another model's estimate means nothing
+        self.model, self.fuzzy, self._grip, self.qp = model, fuzzy, grip, qp
+        self._delays = delays
+        self._n_delay = max(delays)
+        self._schedule = register_schedule(delays)
+        self.apcha_params = c.apcha_params()
+        self._du_max = c.du_max
+        self._u_max = c.u_max
+        self._enabled = c.enabled
+        self._gravity = mp.gravity_mps2
 
     def update_config(self, cfg: MpcConfig) -> None:
         """Apply a new configuration to the running controller without losing its state.
@@ -297,8 +303,8 @@ class MpcController:
         old = self.cfg
         if cfg == old:
             return
-        self.cfg = cfg
         self._apply(cfg, old)
+        self.cfg = cfg
         self.u_prev = _clamp_enabled(self.u_prev, self._enabled, -self._u_max, self._u_max)
         if cfg.horizons_mode == "apcha":
             self.n_p = min(max(self.n_p, cfg.np_min), cfg.np_max)
@@ -442,10 +448,10 @@ class MpcController:
         c, p = self.cfg, self.model.params
         mz = float(self.u_prev[InputIdx.MZ])
         est, mem = self._grip.estimate(zeta, s.ax, s.ay, mz, mu, self.grip_memory, c.dt_s)
-        lim = c.mu_ceiling * G            # the loads' accelerations: no road gives more
-        self.model.grip = Grip(est.mu, s.ax, min(max(s.ay, -lim), lim))
+        lim = c.mu_ceiling * self._gravity    # the loads' accelerations: no road gives more
+        self.model.grip = Grip(est.mu, min(max(s.ax, -lim), lim), min(max(s.ay, -lim), lim))
         vxb = max(s.vx, c.min_speed_mps)
-        r_max = c.yaw_rate_mu_factor * est.mu * G / vxb
+        r_max = c.yaw_rate_mu_factor * est.mu * self._gravity / vxb
         peaks = peak_slips(p, est.mu)
         beta = min(math.radians(c.max_sideslip_deg), peaks[1] + p.b_m * r_max / vxb)
         mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, s.ax))
@@ -467,12 +473,12 @@ class MpcController:
         """Stage 6: bounds of eq. (20), the scaled weights, the QP."""
         c = self.cfg
         vxb = max(s.vx, c.min_speed_mps)
-        mu_b = c.mu_default if mu is None else max(float(mu), 0.01)
+        mu_b = self._mu_bound(mu)
         beta_max, u_max = math.radians(c.max_sideslip_deg), self._u_max
         if pred.grip is not None:          # the envelope of the estimated grip
             mu_b, beta_max = pred.grip.estimate.mu, pred.grip.beta_max_rad
         vy_max = vxb * math.tan(beta_max)
-        r_max = c.yaw_rate_mu_factor * mu_b * G / vxb
+        r_max = c.yaw_rate_mu_factor * mu_b * self._gravity / vxb
         if pred.grip is None:
             # hard bounds "no worse than now": where the QP starts, i.e. after a compensated
             # delay (the friction-aware envelope is soft: its slack keeps the QP feasible)
@@ -504,6 +510,11 @@ class MpcController:
             retry.status = f"{retry.status}, {STATE_BOUNDS_DROPPED}{note}"
             return retry
         return sol
+
+    def _mu_bound(self, mu: float | None) -> float:
+        """μ of the yaw-rate bound without the friction-aware model: the state's (floored at
+        0.01), else ``mu_default``."""
+        return self.cfg.mu_default if mu is None else max(float(mu), 0.01)
 
     def _cost(self, w: _Weights, Ak: np.ndarray, Bk: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str]:
@@ -575,8 +586,7 @@ class MpcController:
             e_s=float(hz.e_s), k_e=float(hz.k_e), k_u=float(hz.k_u),
             solver_status=sol.status, iterations=sol.iterations, slack=float(sol.slack),
             fallback=fallback, ref_index=err.near.index, ref_speed=err.near.speed,
-            mu_estimate=(self.cfg.mu_default if mu is None else max(float(mu), 0.01))
-            if g is None else g.estimate.mu,
+            mu_estimate=self._mu_bound(mu) if g is None else g.estimate.mu,
             yaw_moment_bound=float(self._u_max[InputIdx.MZ]) if g is None else g.mz_max_nm,
             grip_note="" if g is None else g.estimate.note)
 

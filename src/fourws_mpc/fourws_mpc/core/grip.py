@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from fourws_common.magic_formula import peak_argument
 from fourws_mpc.core.axle_tyre import force
 from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse, tyre_sums
 from fourws_mpc.core.model import ModelParams, ModelTuple, StateIdx, as_vector, packed
@@ -166,19 +167,7 @@ class GripEstimator:
         return GripEstimate(mu, source, note), GripMemory(mu)
 
 
-@functools.lru_cache(maxsize=8)
-def _peak_argument(c: float, e: float) -> float:
-    """u* = B α at the Magic Formula's peak: root of C atan(u − E(u − atan u)) = π/2
-    (bisection; a constant of the car, so computed once per (C, E))."""
-    target = math.tan(math.pi / (2.0 * c))
-    lo, hi = 0.0, 50.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if mid - e * (mid - math.atan(mid)) < target:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+_peak_argument = functools.lru_cache(maxsize=8)(peak_argument)   # a constant of the car
 
 
 def peak_slips(p: ModelParams, mu: float) -> tuple[float, float]:

@@ -77,7 +77,9 @@ class LqrFfController:
 
     def reset(self, u_prev: np.ndarray | None = None) -> None:
         """Forget the last command and the reference index."""
-        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).copy()
+        u = np.zeros(N_INPUT) if u_prev is None else np.asarray(u_prev, float).reshape(N_INPUT)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"u_prev: not finite ({u_prev!r}); nothing was reset")
         self.u_prev = np.array([min(max(u[InputIdx.DF], -self._d_max), self._d_max), 0.0, 0.0])
         self.sent = CommandBuffer(self._n_delay, self.u_prev)
         self.ref_hint: int | None = None

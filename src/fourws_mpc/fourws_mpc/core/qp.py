@@ -58,6 +58,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -118,6 +119,30 @@ def _augment(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray
 
 def _as_float(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float)
+
+
+def _check_step(Ak: Any, Bk: Any, dk: Any, zeta0: Any, u_prev: Any, ref: Any, n_p: int,
+                n_c: int, q_eff: Any, r_eff: Any, s_level: Any, warm: Any, terminal_w: Any
+                ) -> None:
+    """The shapes :meth:`MpcQp.solve` needs (its docstring), else ``ValueError`` before
+    anything changes: the compiled build indexes its buffers by them."""
+    sh = np.shape
+    n = sh(Ak)[0] if np.ndim(Ak) == 2 else -1
+    if not 1 <= n_c <= n_p:
+        raise ValueError(f"horizons: need 1 <= N_c <= N_p, got N_p {n_p}, N_c {n_c}")
+    if terminal_w is not None and n_p < 2:
+        raise ValueError(f"terminal cost: needs N_p >= 2 (its reference increment), got {n_p}")
+    want = ((Ak, (n, n), "Ak"), (Bk, (n, N_INPUT), "Bk"), (dk, (n,), "dk"),
+            (zeta0, (n,), "zeta0"), (u_prev, (N_INPUT,), "u_prev"), (ref, (n_p, 2), "ref"),
+            (q_eff, (2,), "q_eff"), (r_eff, (N_INPUT,), "r_eff"))
+    for a, shape, name in want:
+        if sh(a) != shape:
+            raise ValueError(f"{name}: shape {sh(a)}, need {shape} (n {n}, N_p {n_p})")
+    if s_level is not None and sh(s_level) != (N_INPUT,):
+        raise ValueError(f"s_level: shape {sh(s_level)}, need ({N_INPUT},)")
+    if warm is not None and np.size(warm) != n_c * N_INPUT:
+        raise ValueError(f"warm_du_scaled: {np.size(warm)} values, the QP has "
+                         f"{n_c * N_INPUT} increments (N_c {n_c} x {N_INPUT})")
 
 
 def output_matrix(rows: tuple[int, ...] = OUT_ROWS, n_state: int = N_STATE) -> np.ndarray:
@@ -480,6 +505,8 @@ class MpcQp:
         φ and Y or of Y alone; None: the paper's cost, none).
         """
         nu = N_INPUT
+        _check_step(Ak, Bk, dk, zeta0, u_prev, ref, n_p, n_c, q_eff, r_eff, s_level,
+                    warm_du_scaled, terminal_w)
         inst = self.instance(n_p, n_c)
         n = Ak.shape[0]
         D, en, band = inst.tiled(bounds)
@@ -494,9 +521,6 @@ class MpcQp:
                          int(bounds.state_bounds_from_step), float(bounds.state_softness))
         warm = None
         if warm_du_scaled is not None:
-            if np.size(warm_du_scaled) != en.shape[0]:
-                raise ValueError(f"warm_du_scaled: {np.size(warm_du_scaled)} values, the QP "
-                                 f"has {en.shape[0]} increments (N_c {n_c} x {nu})")
             warm = _warm_start(f(warm_du_scaled).reshape(-1), en)
         res = self.solver.solve(CondensedQp(inst.pattern, H, 2.0 * rho, qvec, inst.A, inst.lo,
                                             inst.hi), warm)

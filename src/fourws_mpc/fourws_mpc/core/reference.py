@@ -102,13 +102,13 @@ class Reference:
         arrs = {name: np.array(a, dtype=float)
                 for name, a in (("x", x), ("y", y), ("yaw", yaw), ("curvature", curvature),
                                 ("speed", speed))}
+        arrs["yaw"] = np.unwrap(arrs["yaw"])
         seg = np.hypot(np.diff(arrs["x"]), np.diff(arrs["y"]))
         s = np.concatenate([[0.0], np.cumsum(seg)])
-        for v in arrs.values():
+        for v in (*arrs.values(), s):
             v.setflags(write=False)
-        s.setflags(write=False)
-        return cls(arrs["x"], arrs["y"], np.unwrap(arrs["yaw"]), arrs["curvature"],
-                   arrs["speed"], s, int(search_back), int(search_ahead))
+        return cls(arrs["x"], arrs["y"], arrs["yaw"], arrs["curvature"], arrs["speed"], s,
+                   int(search_back), int(search_ahead))
 
     @property
     def length(self) -> float:

@@ -170,7 +170,7 @@ def hold_coefficients(dt_s: float, vx: float, sigma_m: float) -> tuple[float, fl
     g = (1 − e)/x (accurate for small x), so α̂'(k) = e α̂'(k−1) + (1 − g) α(k) + (g − e) α(k−1)
     (the one statement; :func:`observer_state_space` is its linear form)."""
     x = dt_s * vx / sigma_m
-    return math.exp(-x), -math.expm1(-x) / x
+    return math.exp(-x), (-math.expm1(-x) / x if x != 0.0 else 1.0)   # g → 1 as x → 0
 
 
 def observer_state_space(dt_s: float, vx: float, sigma_m: float

@@ -55,31 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
-def _phi(u: float, e: float) -> float:
-    return u - e * (u - math.atan(u))
-
-
-def peak_argument(shape_c: float, curvature_e: float) -> float:
-    """u* = B·x at the peak of the Magic Formula: root of C atan(u − E(u − atan u)) = π/2.
-
-    Requires 1 < C < 2 and E < 1 (then the argument is increasing in u and the root unique).
-    """
-    if not 1.0 < shape_c < 2.0:
-        raise ValueError(f"Magic Formula shape factor C must be in (1, 2), got {shape_c}")
-    if not curvature_e < 1.0:
-        raise ValueError(f"Magic Formula curvature factor E must be < 1, got {curvature_e}")
-    target = math.tan(math.pi / (2.0 * shape_c))
-    lo, hi = 0.0, 1.0
-    while _phi(hi, curvature_e) < target:
-        hi *= 2.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if _phi(mid, curvature_e) < target:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+from fourws_common.magic_formula import peak_argument  # noqa: F401 - re-exported
 
 
 @dataclass(frozen=True)
