@@ -169,3 +169,13 @@ def test_eps1_is_a_tenth_of_a_metre_of_lateral_error_in_the_shipped_apcha_preset
     assert integrated_error(0.1, 0.0, p) == pytest.approx(p.eps1)
     assert integrated_error(0.0, math.radians(3.2), p) == pytest.approx(p.eps1)
     assert integrated_error(0.2, 0.0, p) == pytest.approx(2 * p.eps1)   # the "0.2 m": 2ε1
+
+
+
+def test_the_terminal_cost_rule_reads_np_min_only_where_apcha_uses_it():
+    fixed = MpcConfig.from_mapping({"terminal_cost": "lqr", "horizons_mode": "fixed",
+                                    "np_min": 1})
+    assert fixed.np_baseline >= 2
+    with pytest.raises(ValueError, match="terminal_cost"):
+        MpcConfig.from_mapping({"terminal_cost": "lqr", "horizons_mode": "apcha",
+                                "np_min": 1, "nc_min": 1, "nc_baseline": 3})

@@ -307,28 +307,33 @@ def test_an_injected_solver_is_reset_with_the_controller():
 
 
 def test_a_config_that_fails_to_apply_changes_nothing(monkeypatch):
-    """update_config builds what can raise (the solver, the model, the fuzzy surfaces) before
-    it commits: when that fails, the controller keeps its config and answers as before."""
+    """update_config builds what can raise (the solver, the model, the fuzzy surfaces, the μ
+    estimate) before it commits: when the last of them fails, the controller keeps its
+    config, model, memory, weights, delays and solver, and answers as before."""
     import fourws_mpc.core.controller as C
 
-    cfg = _cfg()
+    cfg = MpcConfig(prediction_model="single_track_friction", terminal_cost="lqr",
+                    qp_prebuild=False)
     states, ref = _states(), _straight()
     base = _answers(MpcController(cfg), states, ref)
     ctrl = MpcController(cfg)
     _answers(ctrl, states[:30], ref)
-    model, qp = ctrl.model, ctrl.qp
+    kept = (ctrl.model, ctrl.model_memory, ctrl.fuzzy, ctrl._grip, ctrl.qp, ctrl._delays,
+            ctrl.apcha_params)
 
     def broken(*_a, **_k):
         raise ImportError("no such solver here")
 
     monkeypatch.setattr(C, "make_qp_solver", broken)
-    other = MpcConfig(**{**vars(cfg), "qp_solver": "osqp",
-                         "prediction_model": "single_track_actuators"})
+    other = MpcConfig(**{**vars(cfg), "qp_solver": "osqp", "prediction_model": "single_track",
+                         "fuzzy_grid_y": 61, "input_delay_periods": 1, "apcha_eps1": 0.3})
     with pytest.raises(ImportError):
         ctrl.update_config(other)
-    assert ctrl.cfg == cfg and ctrl.model is model and ctrl.qp is qp
+    assert ctrl.cfg == cfg
+    now = (ctrl.model, ctrl.model_memory, ctrl.fuzzy, ctrl._grip, ctrl.qp, ctrl._delays,
+           ctrl.apcha_params)
+    assert all(a is b or a == b for a, b in zip(now, kept, strict=True))
     monkeypatch.undo()
-    ctrl.update_config(cfg)                  # an equal config: a no-op
     rest = [ctrl.step(0.01 * k, s, ref) for k, s in enumerate(states[30:], start=30)]
     assert [(r.delta_front, r.delta_rear, r.yaw_moment) for r in rest] == \
         [(b[0], b[1], b[2]) for b in base[30:]]

@@ -120,3 +120,26 @@ def test_lqr_ff_refuses_a_non_finite_previous_command_and_keeps_its_state():
         assert np.array_equal(ctrl.u_prev, before)
     r = ctrl.step(0.01, VehicleSample(0.15, 0.2, 0.0, 15.0, 0.0, 0.0), ref)
     assert np.isfinite(r.delta_front)
+
+
+
+def test_lqr_ff_keeps_its_config_when_a_new_one_fails_to_build(monkeypatch):
+    import fourws_mpc.core.lqr_controller as L
+    from fourws_mpc.core.config import MpcConfig
+    from fourws_mpc.core.laws import make_controller
+
+    cfg = MpcConfig(law="lqr_ff", controller="lqr_ff", use_rear_steer=False, use_dyc=False,
+                    weights_mode="fixed", horizons_mode="fixed", qp_prebuild=False)
+    ctrl = make_controller(cfg)
+    law, model, delays = ctrl.law, ctrl.model, ctrl._delays
+
+    def broken(*_a, **_k):
+        raise ValueError("no such model here")
+
+    monkeypatch.setattr(L, "make_prediction_model", broken)
+    other = MpcConfig(**{**vars(cfg), "lqr_e1_max_m": 0.2, "input_delay_periods": 2,
+                         "prediction_model": "single_track"})
+    with pytest.raises(ValueError, match="no such model"):
+        ctrl.update_config(other)
+    assert ctrl.cfg == cfg and ctrl.law is law and ctrl.model is model
+    assert ctrl._delays == delays

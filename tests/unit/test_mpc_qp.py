@@ -1,5 +1,6 @@
 """QP of eq. (5)-(20): prediction matrices, unconstrained optimum, constraints, OSQP instances."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -431,6 +432,8 @@ def test_the_input_level_cost_is_the_sum_of_the_held_levels_over_the_horizon():
     {"dk": np.zeros(5)},
     {"s_level": np.ones(2)},
     {"warm_du_scaled": np.zeros((5, 3))},
+    {"terminal_w": np.eye(4)},               # a 6-state model's W has 5 or 6 rows
+    {"bounds": "u_max"}, {"bounds": "du_max"}, {"bounds": "enabled"},
 ])
 def test_a_step_of_the_wrong_shape_is_refused_before_anything_changes(bad):
     z, u, Ak, Bk, dk = _model(4)
@@ -439,10 +442,18 @@ def test_a_step_of_the_wrong_shape_is_refused_before_anything_changes(bad):
                 q_eff=np.array([50.0, 40.0]), r_eff=np.array([1e4, 1e4, 1e-4]), rho=1e3,
                 bounds=_bounds())
     ok = qp.solve(**good)
+    if bad.get("bounds"):
+        name = bad["bounds"]
+        bad = {"bounds": dataclasses.replace(_bounds(), **{name: getattr(_bounds(), name)[:2]})}
     before = dict(qp.instances)
+    inst = qp.instance(12, 6)
+    buffers = [a.copy() for a in (inst.A, inst.lo, inst.hi)]
     with pytest.raises(ValueError):
-        qp.solve(**{**good, **bad})
-    assert qp.instances == before and qp.instance(12, 6).uses == 1
+        qp.solve(**{**good, **bad, "n_p": 13, "ref": np.zeros((13, 2))} if "terminal_w" in bad
+                 else {**good, **bad})
+    assert qp.instances == before and inst.uses == 1
+    after = (inst.A, inst.lo, inst.hi)
+    assert all(np.array_equal(a, b) for a, b in zip(after, buffers, strict=True))
     again = qp.solve(**good)
     assert again.ok and np.array_equal(again.u, ok.u)
 
@@ -457,3 +468,16 @@ def test_the_terminal_cost_needs_two_prediction_steps():
         qp.solve(Ak, Bk, dk, z, u, np.zeros((1, 2)), 1, 1, q, r, 1e3, _bounds(), terminal_w=W)
     assert qp.solve(Ak, Bk, dk, z, u, np.zeros((2, 2)), 2, 1, q, r, 1e3, _bounds(),
                     terminal_w=W).ok
+
+
+
+@pytest.mark.parametrize("bad", [{"n_c": 13}, {"s_level": np.ones(2)}, {"du_max": np.ones(2)},
+                                 {"enabled": np.ones(2, bool)}, {"dk": np.zeros(5)}])
+def test_the_unconstrained_gain_refuses_what_the_step_refuses(bad):
+    z, u, Ak, Bk, dk = _model(6)
+    good = dict(Ak=Ak, Bk=Bk, dk=dk, n_p=12, n_c=6, q_eff=np.array([50.0, 40.0]),
+                r_eff=np.array([1e4, 1e4, 1e-4]), du_max=_bounds().du_max,
+                enabled=_bounds().enabled)
+    assert np.all(np.isfinite(Q.unconstrained_gain(**good)))
+    with pytest.raises(ValueError):
+        Q.unconstrained_gain(**{**good, **bad})

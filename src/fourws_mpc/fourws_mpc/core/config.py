@@ -265,9 +265,11 @@ class MpcConfig:
         if self.nc_min > self.nc_max:
             raise ValueError(f"nc_min, nc_max: need nc_min <= nc_max, got {self.nc_min}, "
                              f"{self.nc_max}")
-        if self.terminal_cost == "lqr" and min(self.np_baseline, self.np_min) < 2:
-            raise ValueError("terminal_cost: lqr needs N_p >= 2 (np_baseline, np_min), got "
-                             f"{self.np_baseline}, {self.np_min}")
+        np_least = (min(self.np_baseline, self.np_min) if self.horizons_mode == "apcha"
+                    else self.np_baseline)
+        if self.terminal_cost == "lqr" and np_least < 2:
+            raise ValueError(f"terminal_cost: lqr needs N_p >= 2, got {np_least} (np_baseline, "
+                             "np_min with APCHA)")
         if self.nc_baseline > self.np_baseline:
             raise ValueError("nc_baseline, np_baseline: need N_c <= N_p, got "
                              f"{self.nc_baseline} > {self.np_baseline}")

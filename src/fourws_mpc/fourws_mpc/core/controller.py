@@ -449,12 +449,13 @@ class MpcController:
         mz = float(self.u_prev[InputIdx.MZ])
         est, mem = self._grip.estimate(zeta, s.ax, s.ay, mz, mu, self.grip_memory, c.dt_s)
         lim = c.mu_ceiling * self._gravity    # the loads' accelerations: no road gives more
-        self.model.grip = Grip(est.mu, min(max(s.ax, -lim), lim), min(max(s.ay, -lim), lim))
+        ax = min(max(s.ax, -lim), lim)
+        self.model.grip = Grip(est.mu, ax, min(max(s.ay, -lim), lim))
         vxb = max(s.vx, c.min_speed_mps)
         r_max = c.yaw_rate_mu_factor * est.mu * self._gravity / vxb
         peaks = peak_slips(p, est.mu)
         beta = min(math.radians(c.max_sideslip_deg), peaks[1] + p.b_m * r_max / vxb)
-        mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, s.ax))
+        mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, ax))
         lo, hi = -self._u_max.copy(), self._u_max.copy()
         hi[InputIdx.MZ] = mz_max
         lo[InputIdx.MZ] = -mz_max

@@ -57,22 +57,28 @@ class LqrFfController:
         self.reset()
 
     def _build(self, c: MpcConfig) -> None:
-        self.law = LqrLateral(c.model_params(), c.dt_s, lqr_weights(c))
+        """The law, the limits, the delays and the model of ``c``; what can raise is built
+        first, so a config that fails here changes nothing."""
+        mp = c.model_params()
+        law = LqrLateral(mp, c.dt_s, lqr_weights(c))
+        model = make_prediction_model(c.prediction_model, mp, c.prediction_discretisation)
+        delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
+        self.law, self.model = law, model
         self._d_max = math.radians(c.max_steer_front_deg)
         self._dd_max = math.radians(c.max_dsteer_front_deg)
-        self._delays = channel_delays(c.input_delay_periods, c.steer_dead_time_s, c.dt_s)
-        self._n_delay = max(self._delays)
-        self._schedule = register_schedule(self._delays)
-        self.model = make_prediction_model(c.prediction_model, c.model_params(),
-                                           c.prediction_discretisation)
+        self._delays = delays
+        self._n_delay = max(delays)
+        self._schedule = register_schedule(delays)
 
     def update_config(self, cfg: MpcConfig) -> None:
-        """New constants, the last command and the reference index kept."""
+        """New constants, the last command and the reference index kept; a config that
+        fails to build changes nothing."""
         if cfg != self.cfg:
-            if cfg.prediction_model != self.cfg.prediction_model:
+            forget = cfg.prediction_model != self.cfg.prediction_model
+            self._build(cfg)
+            if forget:
                 self.model_memory = None
             self.cfg = cfg
-            self._build(cfg)
             self.sent = self.sent.resized(self._n_delay)
 
     def reset(self, u_prev: np.ndarray | None = None) -> None:

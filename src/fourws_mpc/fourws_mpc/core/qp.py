@@ -122,8 +122,8 @@ def _as_float(x: np.ndarray) -> np.ndarray:
 
 
 def _check_step(Ak: Any, Bk: Any, dk: Any, zeta0: Any, u_prev: Any, ref: Any, n_p: int,
-                n_c: int, q_eff: Any, r_eff: Any, s_level: Any, warm: Any, terminal_w: Any
-                ) -> None:
+                n_c: int, q_eff: Any, r_eff: Any, s_level: Any, warm: Any, terminal_w: Any,
+                bounds: QpBounds | None = None) -> None:
     """The shapes :meth:`MpcQp.solve` needs (its docstring), else ``ValueError`` before
     anything changes: the compiled build indexes its buffers by them."""
     sh = np.shape
@@ -140,6 +140,12 @@ def _check_step(Ak: Any, Bk: Any, dk: Any, zeta0: Any, u_prev: Any, ref: Any, n_
             raise ValueError(f"{name}: shape {sh(a)}, need {shape} (n {n}, N_p {n_p})")
     if s_level is not None and sh(s_level) != (N_INPUT,):
         raise ValueError(f"s_level: shape {sh(s_level)}, need ({N_INPUT},)")
+    if bounds is not None:
+        for name in ("du_max", "u_max", "enabled") + (("u_min",) if bounds.u_min is not None
+                                                      else ()):
+            if sh(getattr(bounds, name)) != (N_INPUT,):
+                raise ValueError(f"bounds.{name}: shape {sh(getattr(bounds, name))}, need "
+                                 f"({N_INPUT},)")
     if warm is not None and np.size(warm) != n_c * N_INPUT:
         raise ValueError(f"warm_du_scaled: {np.size(warm)} values, the QP has "
                          f"{n_c * N_INPUT} increments (N_c {n_c} x {N_INPUT})")
@@ -439,7 +445,12 @@ def unconstrained_gain(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, n_p: int,
     minimiser without its bounds, on a zero reference: −H⁻¹ ∂g/∂ξ with H and g from
     :func:`~fourws_mpc.core.condense.condense`, the code :meth:`MpcQp.solve` runs. g is
     affine in ξ, so its Jacobian is exact column by column; disabled inputs are left out."""
-    n = Ak.shape[0]
+    n = np.shape(Ak)[0]
+    _check_step(Ak, Bk, dk, np.zeros(n), np.zeros(N_INPUT), np.zeros((n_p, 2)), n_p, n_c,
+                q_eff, r_eff, s_level, None, terminal_w)
+    for name, a in (("du_max", du_max), ("enabled", enabled)):
+        if np.shape(a) != (N_INPUT,):
+            raise ValueError(f"{name}: shape {np.shape(a)}, need ({N_INPUT},)")
     Aa, Ba, da = augment(Ak, Bk, dk)
     D = np.tile(np.asarray(du_max, dtype=float), n_c)
     ref = np.zeros((n_p, 2))
@@ -506,11 +517,11 @@ class MpcQp:
         """
         nu = N_INPUT
         _check_step(Ak, Bk, dk, zeta0, u_prev, ref, n_p, n_c, q_eff, r_eff, s_level,
-                    warm_du_scaled, terminal_w)
-        inst = self.instance(n_p, n_c)
+                    warm_du_scaled, terminal_w, bounds)
         n = Ak.shape[0]
-        D, en, band = inst.tiled(bounds)
         W, out = _terminal(terminal_w, n)
+        inst = self.instance(n_p, n_c)
+        D, en, band = inst.tiled(bounds)
         f = _as_float
         lower = bounds.lower()
         H, qvec = _build(f(Ak), f(Bk), f(dk), f(zeta0), f(u_prev), f(ref), _OUT_ROWS, n_c, D,
