@@ -121,34 +121,42 @@ def _as_float(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float)
 
 
+def _sh(a: Any) -> tuple[int, ...]:
+    return a.shape if type(a) is np.ndarray else np.shape(a)
+
+
 def _check_step(Ak: Any, Bk: Any, dk: Any, zeta0: Any, u_prev: Any, ref: Any, n_p: int,
                 n_c: int, q_eff: Any, r_eff: Any, s_level: Any, warm: Any, terminal_w: Any,
                 bounds: QpBounds | None = None) -> None:
     """The shapes :meth:`MpcQp.solve` needs (its docstring), else ``ValueError`` before
-    anything changes: the compiled build indexes its buffers by them."""
-    sh = np.shape
-    n = sh(Ak)[0] if np.ndim(Ak) == 2 else -1
+    anything changes: the compiled build indexes its buffers by them. One comparison of
+    shapes on the 100 Hz path; the message names the culprit."""
+    shape_a = _sh(Ak)
+    n = shape_a[0] if len(shape_a) == 2 else -1
+    nu = N_INPUT
     if not 1 <= n_c <= n_p:
         raise ValueError(f"horizons: need 1 <= N_c <= N_p, got N_p {n_p}, N_c {n_c}")
     if terminal_w is not None and n_p < 2:
         raise ValueError(f"terminal cost: needs N_p >= 2 (its reference increment), got {n_p}")
-    want = ((Ak, (n, n), "Ak"), (Bk, (n, N_INPUT), "Bk"), (dk, (n,), "dk"),
-            (zeta0, (n,), "zeta0"), (u_prev, (N_INPUT,), "u_prev"), (ref, (n_p, 2), "ref"),
-            (q_eff, (2,), "q_eff"), (r_eff, (N_INPUT,), "r_eff"))
+    b = bounds
+    if (shape_a == (n, n) and _sh(Bk) == (n, nu) and _sh(dk) == (n,) and _sh(zeta0) == (n,)
+            and _sh(u_prev) == (nu,) and _sh(ref) == (n_p, 2) and _sh(q_eff) == (2,)
+            and _sh(r_eff) == (nu,) and (s_level is None or _sh(s_level) == (nu,))
+            and (warm is None or np.size(warm) == n_c * nu)
+            and (b is None or (_sh(b.du_max) == _sh(b.u_max) == _sh(b.enabled) == (nu,)
+                               and (b.u_min is None or _sh(b.u_min) == (nu,))))):
+        return
+    want = [(Ak, (n, n), "Ak"), (Bk, (n, nu), "Bk"), (dk, (n,), "dk"), (zeta0, (n,), "zeta0"),
+            (u_prev, (nu,), "u_prev"), (ref, (n_p, 2), "ref"), (q_eff, (2,), "q_eff"),
+            (r_eff, (nu,), "r_eff"), (s_level, (nu,), "s_level")]
+    if b is not None:
+        want += [(b.du_max, (nu,), "bounds.du_max"), (b.u_max, (nu,), "bounds.u_max"),
+                 (b.enabled, (nu,), "bounds.enabled"), (b.u_min, (nu,), "bounds.u_min")]
     for a, shape, name in want:
-        if sh(a) != shape:
-            raise ValueError(f"{name}: shape {sh(a)}, need {shape} (n {n}, N_p {n_p})")
-    if s_level is not None and sh(s_level) != (N_INPUT,):
-        raise ValueError(f"s_level: shape {sh(s_level)}, need ({N_INPUT},)")
-    if bounds is not None:
-        for name in ("du_max", "u_max", "enabled") + (("u_min",) if bounds.u_min is not None
-                                                      else ()):
-            if sh(getattr(bounds, name)) != (N_INPUT,):
-                raise ValueError(f"bounds.{name}: shape {sh(getattr(bounds, name))}, need "
-                                 f"({N_INPUT},)")
-    if warm is not None and np.size(warm) != n_c * N_INPUT:
-        raise ValueError(f"warm_du_scaled: {np.size(warm)} values, the QP has "
-                         f"{n_c * N_INPUT} increments (N_c {n_c} x {N_INPUT})")
+        if a is not None and _sh(a) != shape:
+            raise ValueError(f"{name}: shape {_sh(a)}, need {shape} (n {n}, N_p {n_p})")
+    raise ValueError(f"warm_du_scaled: {np.size(warm)} values, the QP has {n_c * nu} "
+                     f"increments (N_c {n_c} x {nu})")
 
 
 def output_matrix(rows: tuple[int, ...] = OUT_ROWS, n_state: int = N_STATE) -> np.ndarray:
