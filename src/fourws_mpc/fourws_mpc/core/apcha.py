@@ -95,6 +95,11 @@ def np_target(e_s: float, p: ApchaParams) -> int:
     return p.np_min + p.np_step
 
 
+def clamp_nc(n_c: int, n_p: int) -> int:
+    """The last clamp of eq. (15): N_c within [⌊N_p/3⌋, ⌊N_p/2⌋] (the lower bound wins)."""
+    return max(n_p // 3, min(n_c, n_p // 2))
+
+
 def apcha(e_s: float, e_s_prev: float | None, du_prev: np.ndarray,
           np_prev: int, nc_prev: int, p: ApchaParams) -> ApchaResult:
     """One APCHA update, eq. (8)-(15).
@@ -118,7 +123,6 @@ def apcha(e_s: float, e_s_prev: float | None, du_prev: np.ndarray,
         nct = nc_i - p.nc_step
     else:
         nct = nc_i
-    n_c = max(p.nc_min, min(nct, p.nc_max))
-    n_c = max(n_p // 3, min(n_c, n_p // 2))
+    n_c = clamp_nc(max(p.nc_min, min(nct, p.nc_max)), n_p)
     return ApchaResult(int(n_p), int(n_c), float(e_s), float(k_e), float(k_u), int(npt),
                        int(nct))

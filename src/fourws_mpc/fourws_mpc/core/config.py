@@ -19,7 +19,7 @@ import numpy as np
 
 from fourws_common.params import from_mapping, param
 from fourws_common.vehicle_info import field_range
-from fourws_mpc.core.apcha import ApchaParams
+from fourws_mpc.core.apcha import ApchaParams, clamp_nc
 from fourws_mpc.core.fuzzy_weights import FuzzySpec
 from fourws_mpc.core.model import ModelParams
 from fourws_mpc.core.prediction_model import (
@@ -366,8 +366,7 @@ class MpcConfig:
         pairs = {(self.np_baseline, self.nc_baseline)}
         if self.horizons_mode == "apcha":
             for n_p in range(self.np_min, self.np_max + 1):
-                lo = max(n_p // 3, min(self.nc_min, n_p // 2))
-                hi = max(n_p // 3, min(self.nc_max, n_p // 2))
+                lo, hi = clamp_nc(self.nc_min, n_p), clamp_nc(self.nc_max, n_p)
                 pairs.update((n_p, n_c) for n_c in range(lo, hi + 1))
         return sorted(pairs)
 
