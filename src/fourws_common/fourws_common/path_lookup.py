@@ -40,13 +40,13 @@ def windowed_search(best: Callable[[int, int], Found], n: int, hint: int | None,
     ``best(lo, hi)`` measures the candidates lo..hi−1 and returns a tuple whose first item is
     the index (in 0..n−1) of the best of them; that tuple is returned.
     """
-    if hint is not None and max(0, hint - back) < min(n, hint + ahead):
-        lo = max(0, hint - back)
-        hi = min(n, hint + ahead)        # a hint off the candidates: the whole search
-        found = best(lo, hi)
-        i = found[0]
-        if not ((i == lo and lo > 0) or (i == hi - 1 and hi < n)):
-            return found
+    if hint is not None:
+        lo, hi = max(0, hint - back), min(n, hint + ahead)
+        if lo < hi:                      # else a hint off the candidates: the whole search
+            found = best(lo, hi)
+            i = found[0]
+            if not ((i == lo and lo > 0) or (i == hi - 1 and hi < n)):
+                return found
     return best(0, n)
 
 

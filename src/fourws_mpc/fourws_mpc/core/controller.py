@@ -456,7 +456,7 @@ class MpcController:
         peaks = peak_slips(p, est.mu)
         beta = min(math.radians(c.max_sideslip_deg), peaks[1] + p.b_m * r_max / vxb)
         mz_max = min(c.max_yaw_moment_nm, yaw_moment_bound(zeta, p, est.mu, ax))
-        lo, hi = -self._u_max.copy(), self._u_max.copy()
+        lo, hi = -self._u_max, self._u_max.copy()       # negation is a new array
         hi[InputIdx.MZ] = mz_max
         lo[InputIdx.MZ] = -mz_max
         w_lo, w_hi = steer_window(s.vx, s.vy, s.yaw_rate, p, est.mu, peaks)

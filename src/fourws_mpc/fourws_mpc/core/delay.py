@@ -63,14 +63,15 @@ def predict_over_delay(Ak: np.ndarray, Bk: np.ndarray, dk: np.ndarray, zeta: np.
     (n, m) and inputs (N_d, 3, m), the same recursion on the columns of a linear map (the
     stability margins' form, ``fourws_bringup.core.margins``; dk then zero)."""
     if np.ndim(zeta) == 1:
-        n, m = np.shape(Bk)
-        if np.shape(Ak) != (n, n) or np.shape(zeta) != (n,) or np.shape(dk) != (n,) or (
-                np.ndim(inputs) != 2 or np.shape(inputs)[1] != m):
-            raise ValueError(f"predict_over_delay: A {np.shape(Ak)}, B {np.shape(Bk)}, d "
-                             f"{np.shape(dk)}, ζ {np.shape(zeta)}, inputs {np.shape(inputs)}")
         f = np.ascontiguousarray
-        return _predict_state(f(Ak, dtype=float), f(Bk, dtype=float), f(dk, dtype=float),
-                              f(zeta, dtype=float), f(inputs, dtype=float))
+        A, B, d, z, u = (f(Ak, dtype=float), f(Bk, dtype=float), f(dk, dtype=float),
+                         f(zeta, dtype=float), f(inputs, dtype=float))
+        n, m = z.shape[0], (B.shape[1] if B.ndim == 2 else -1)
+        if A.shape != (n, n) or B.shape != (n, m) or d.shape != (n,) or (
+                u.ndim != 2 or u.shape[1] != m):
+            raise ValueError(f"predict_over_delay: A {A.shape}, B {B.shape}, d {d.shape}, "
+                             f"ζ {z.shape}, inputs {u.shape}")
+        return _predict_state(A, B, d, z, u)
     z = zeta
     for u in inputs:
         z = Ak @ z + Bk @ u + dk[:, None]

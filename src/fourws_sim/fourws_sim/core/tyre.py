@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fourws_common.magic_formula import peak_argument  # noqa: F401 - re-exported
+from fourws_common.magic_formula import peak_argument
 
 
 @dataclass(frozen=True)
