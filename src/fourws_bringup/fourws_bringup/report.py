@@ -235,7 +235,7 @@ def _draw_overview(runs: Sequence[tuple[str, Series]], path: Path, title: str) -
         draw(ax, runs)
         _legend(ax, len(runs))
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.065, right=0.985, bottom=0.07, top=0.91, wspace=0.3, hspace=0.32)
     return _save(fig, path)
 
 
@@ -244,7 +244,7 @@ def _draw_panel(runs: Sequence[tuple[str, Series]], path: Path, title: str, draw
     draw(ax, runs)
     _legend(ax, len(runs))
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.13, top=0.87)
     return _save(fig, path)
 
 
@@ -361,7 +361,7 @@ def _draw_adaptive(runs: Sequence[tuple[str, Series]], path: Path, title: str,
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, ncol=2)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.09, right=0.97, bottom=0.08, top=0.9, hspace=0.22)
     return _save(fig, path)
 
 
@@ -387,7 +387,9 @@ def _draw_torques(runs: Sequence[tuple[str, Series]], path: Path, title: str) ->
             top.legend(lines, labels, fontsize=7, ncol=5, loc="upper right", framealpha=0.9)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(title)
-    fig.tight_layout()
+    h_in = 3.2 * len(runs) + 0.6          # the figure's height: margins fixed in inches
+    fig.subplots_adjust(left=0.1, right=0.9, bottom=0.55 / h_in, top=1.0 - 0.65 / h_in,
+                        hspace=0.35)
     return _save(fig, path)
 
 
