@@ -117,6 +117,14 @@ def dyc_lines(by_case) -> list[str]:
             "|---|---|---|---|---|", *out]
 
 
+def fws_mechanism(goals) -> list[str]:
+    """Where the front-steer target is missed, where its mechanism is measured."""
+    missed = any(not ok and "mpc_fws" in t for t, _, ok in goals)
+    return ["Why `mpc_fws` misses where `lqr_ff` passes (its tuning's grip constraint, the "
+            "scalings that would pass, what they cost): `docs/results.md`, \"Front steer at its "
+            "limit\", and `studies/fws_at_the_limit/README.md`.", ""] if missed else []
+
+
 def fws_lines(by_case) -> list[str]:
     out = []
     for cd in SHIPPED:
@@ -167,13 +175,14 @@ def _raised(rows: list[dict]) -> list[dict]:
 
 def page(rows: list[dict], figs: list[str]) -> str:
     """docs/limits.md from the sweep's rows and the figure files in docs/limits/."""
-    from fourws_bringup.core.configs import load_mpc_config
+    from fourws_bringup.core.configs import load_allocator_config, load_mpc_config
 
     raised = _raised(rows)
     shipped = {c: ("friction" if load_mpc_config(c).prediction_model == "single_track_friction"
                    else "linear") for c in L.CONTROLLERS if c != "lqr_ff"}
     by_case = L.with_shipped(L.cases(rows), shipped)
     twins = L.twin_failures(by_case)
+    goals = L.targets(by_case, load_allocator_config("improved").method)
     alloc_keys = (("max abs e_Y m", "max_abs_lateral_error_m", 3),
                   ("max abs heading error deg", "max_abs_heading_error_deg", 2),
                   ("max abs β deg", "max_abs_sideslip_deg", 2),
@@ -228,6 +237,15 @@ def page(rows: list[dict], figs: list[str]) -> str:
         "braking distance. Rules:",
         "",
         *[f"* {rule}" for rule in L.RULES],
+        "",
+        "## Targets",
+        f"Each controller as shipped, in the realistic world ({L.TARGET_CONDITION}; "
+        "`limits_report.targets` states how each is judged):",
+        "",
+        L.targets_table(goals),
+        *fws_mechanism(goals),
+        "No regression on the paper's manoeuvres is judged on their own bench (`make run`, "
+        "`docs/results.md`).",
         "",
         "## Headline: highest rung or speed passed clean",
         "As shipped (" + ", ".join(f"{c}: {m}" for c, m in shipped.items()) + " tyres; lqr_ff "

@@ -230,3 +230,88 @@ def adaptive_table(by_case: dict, controller: str, condition: str, prefix: str) 
             cells.append(f"{fmt(lo, '', dig)}–{fmt(hi, '', dig)}")
         lines.append(f"| {fmt(rung_value(sc))} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+#: the bench's targets are judged in the realistic world, each controller as shipped
+TARGET_CONDITION = "realistic_shipped"
+
+
+def _runs(by_case: dict, controller: str, condition: str, prefix: str = "",
+          max_rung: float = math.inf) -> list[dict]:
+    return [r for (c, sc, cd), rs in by_case.items() for r in rs
+            if c == controller and cd == condition and sc.startswith(prefix)
+            and (not sc.startswith(("ladder", "iso")) or rung_value(sc) <= max_rung)]
+
+
+def _max(runs: Sequence[dict], key: str) -> float:
+    v = [x for x in (_num(r.get(key)) for r in runs) if math.isfinite(x)]
+    return max(v) if v else math.nan
+
+
+def targets(by_case: dict, alloc_shipped: str, alloc_baseline: str = "production"
+            ) -> list[tuple[str, str, bool]]:
+    """(target, what the bench measured, met) for each target of the limit bench (issue 40),
+    under :data:`TARGET_CONDITION`; ``alloc_shipped``: improved's allocation method, judged
+    on split-μ braking against ``alloc_baseline`` (the conditions ``realistic_<method>``)."""
+    cd = TARGET_CONDITION
+    out = []
+    twins = [t for t in twin_failures(by_case) if f"({cd})" in t]
+    out.append(("no preset with DYC fails a case its twin without DYC completes",
+                f"such cases: {len(twins)}" + (" (" + "; ".join(twins) + ")" if twins else ""),
+                not twins))
+    runs = _runs(by_case, "improved", cd)
+    spins = sum(_truthy(r.get("spin")) for r in runs)
+    out.append(("improved never spins", f"{spins} spins in {len(runs)} runs", spins == 0))
+    dlc = [r for p in ("ladder_dlc_60_mu05_", "ladder_dlc_60_mu09_")
+           for r in _runs(by_case, "improved", cd, p, max_rung=1.0)]
+    n_clean = sum(_truthy(r.get("completed_clean")) for r in dlc)
+    beta = _max(dlc, "max_abs_sideslip_deg")
+    out.append(("improved completes the DLC through 1.0 μg on μ 0.5 and 0.9, in lane, "
+                "max abs β ≤ 3°", f"{n_clean}/{len(dlc)} runs clean, max abs β {fmt(beta, '°')}",
+                bool(dlc) and n_clean == len(dlc) and beta <= 3.0))
+    iso = LADDERS["ISO 3888-2 μ 0.9"]
+    best = {c: headline(by_case, c, cd, iso)[0] for c in CONTROLLERS}
+    others = max((v for c, v in best.items() if c != "improved" and v is not None),
+                 default=None)
+    mine = best["improved"]
+    out.append(("improved passes the highest ISO 3888-2 entry speed of any preset",
+                f"improved {fmt(mine, ' km/h', 0)}, the best other {fmt(others, ' km/h', 0)}",
+                mine is not None and (others is None or mine >= others)))
+    ch = paired_change(by_case, "improved", "ampc_4ws", cd, "max_abs_sideslip_deg")
+    raised = []
+    for name, prefix in LADDERS.items():
+        a = headline(by_case, "improved", cd, prefix)[0]
+        b = headline(by_case, "ampc_4ws", cd, prefix)[0]
+        if a is not None and (b is None or a > b):
+            dig = 2 if prefix.startswith("ladder") else 0
+            raised.append(f"{name} {fmt(b, '', dig)} → {fmt(a, '', dig)}")
+    med = float(np.median(ch)) if ch else math.nan
+    out.append(("DYC earns its keep at ≥ 0.9 μg: improved against ampc_4ws lowers max abs β by "
+                "≥ 25 % over paired seeds, or raises the highest rung passed",
+                f"median change {fmt(100 * med, ' %', 0)} over {len(ch)} pairs; rung raised: "
+                + (", ".join(raised) if raised else "none"),
+                (math.isfinite(med) and med <= -0.25) or bool(raised)))
+    misses = sorted(sc for (c, sc, ccd), rs in by_case.items()
+                    if c == "lqr_ff" and ccd == cd and clean(rs)
+                    and ("mpc_fws", sc, cd) in by_case and not clean(by_case[("mpc_fws", sc, cd)]))
+    out.append(("wherever lqr_ff stays clean, mpc_fws does too",
+                f"cases where it does not: {len(misses)}" + (" (" + ", ".join(misses) + ")"
+                                                             if misses else ""), not misses))
+    cells, ok = [], True
+    for method in (alloc_shipped, alloc_baseline):
+        rs = by_case.get(("improved", "split_mu_braking_80_20", f"realistic_{method}"), [])
+        n = sum(_truthy(r.get("completed_clean")) for r in rs)
+        ok = ok and (method != alloc_shipped or (bool(rs) and n == len(rs)))
+        cells.append(f"{method} {n}/{len(rs)} clean, max abs heading error "
+                     f"{fmt(median(rs, 'max_abs_heading_error_deg'), '°')}, braking "
+                     f"{fmt(median(rs, 'braking_distance_m'), ' m', 1)}")
+    out.append(("split-μ braking completes (improved, against the production allocation)",
+                "; ".join(cells), ok))
+    return out
+
+
+def targets_table(rows: Sequence[tuple[str, str, bool]]) -> str:
+    """:func:`targets` as a Markdown table."""
+    lines = ["| target | measured | met |", "|---|---|---|"]
+    lines += [f"| {t} | {m} | {'yes' if ok else '**no**'} |" for t, m, ok in rows]
+    return "\n".join(lines) + "\n"
