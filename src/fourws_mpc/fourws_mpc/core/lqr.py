@@ -34,7 +34,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from fourws_mpc.core.model import ModelParams, zoh
 
@@ -88,6 +87,8 @@ def error_model(p: ModelParams, vx: float) -> tuple[np.ndarray, np.ndarray, np.n
 
 def dlqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
     """K (1, 4) of u = −K x minimising Σ xᵀQx + uᵀRu (discrete Riccati equation)."""
+    import scipy.linalg  # here: only lqr_ff solves it, and the MPC's process starts without it
+
     P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
     return np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
 
