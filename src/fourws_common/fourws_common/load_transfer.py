@@ -31,12 +31,6 @@ class LoadGeometry:
     roll_stiffness_front_share: float
     gravity_mps2: float
 
-    def static_loads(self) -> tuple[float, float]:
-        """Static load of one front and one rear wheel (N)."""
-        length = self.cg_to_front_axle_m + self.cg_to_rear_axle_m
-        w = self.mass_kg * self.gravity_mps2
-        return 0.5 * w * self.cg_to_rear_axle_m / length, 0.5 * w * self.cg_to_front_axle_m / length
-
 
 def wheel_loads(ax: float, ay: float, g: LoadGeometry) -> tuple[float, float, float, float]:
     """(F_z,FL, F_z,FR, F_z,RL, F_z,RR), N, of the module docstring."""

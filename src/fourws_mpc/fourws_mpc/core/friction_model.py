@@ -56,14 +56,22 @@ class Grip:
 
 
 def axle_loads(p: ModelParams | ModelTuple) -> tuple[float, float]:
-    """Static (F_z,f, F_z,r), N."""
-    w = p.mass_kg * p.gravity_mps2
-    length = p.a_m + p.b_m
-    return w * p.b_m / length, w * p.a_m / length
+    """Static (F_z,f, F_z,r), N: the wheel loads at rest (``load_transfer``, their one owner)
+    summed per axle."""
+    fl, fr, rl, rr = load_transfer.loads(0.0, 0.0, p.mass_kg, p.a_m, p.b_m, p.cg_height_m,
+                                         p.track_width_m, p.track_width_m,
+                                         p.roll_stiffness_front_share, p.gravity_mps2)
+    return fl + fr, rl + rr
 
 
-_axle_loads = njit(cache=True)(axle_loads)
 _wheel_loads = njit(cache=True)(load_transfer.loads)
+
+
+@njit(cache=True)
+def _axle_loads(p: ModelTuple) -> tuple[float, float]:
+    """:func:`axle_loads`, compiled."""
+    fl, fr, rl, rr = _loads(p, 0.0, 0.0)
+    return fl + fr, rl + rr
 
 
 def ellipse(mz: float, p: ModelParams, g: Grip) -> tuple[float, float]:
