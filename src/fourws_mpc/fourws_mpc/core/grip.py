@@ -51,7 +51,14 @@ from numba import njit
 from fourws_common.magic_formula import peak_argument
 from fourws_mpc.core.axle_tyre import force
 from fourws_mpc.core.friction_model import Grip, axle_loads, ellipse, tyre_sums
-from fourws_mpc.core.model import ModelParams, ModelTuple, StateIdx, as_vector, packed
+from fourws_mpc.core.model import (
+    ModelParams,
+    ModelTuple,
+    StateIdx,
+    as_vector,
+    axle_directions,
+    packed,
+)
 from fourws_mpc.core.relaxation_model import RelaxIdx
 
 #: the μ range the evidence is searched in
@@ -185,7 +192,7 @@ def steer_window(vx: float, vy: float, r: float, p: ModelParams, mu: float,
     peak gives no more force (module docstring). ``peaks``: :func:`peak_slips` at μ̂ when
     the caller has them."""
     vxs = max(vx, p.min_speed_mps)
-    kin_f, kin_r = (vy + p.a_m * r) / vxs, (vy - p.b_m * r) / vxs
+    kin_f, kin_r = axle_directions(vy, r, vxs, p)
     pk_f, pk_r = peak_slips(p, mu) if peaks is None else peaks
     return np.array((kin_f - pk_f, kin_r - pk_r)), np.array((kin_f + pk_f, kin_r + pk_r))
 

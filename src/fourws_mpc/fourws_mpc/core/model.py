@@ -124,13 +124,21 @@ def packed(p: ModelParams) -> ModelTuple:
     return ModelTuple(*(float(getattr(p, name)) for name in ModelTuple._fields))
 
 
+def axle_directions(vy: float, r: float, vxs: float, p: ModelParams) -> tuple[float, float]:
+    """((v_y + a r)/v_x, (v_y − b r)/v_x): the direction of each axle's velocity (rad, small
+    angles), the part of eq. (1)'s slip angles α = δ − (·) the wheels do not set; ``vxs`` the
+    speed already floored at ``min_speed_mps`` by the caller."""
+    return (vy + p.a_m * r) / vxs, (vy - p.b_m * r) / vxs
+
+
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
     """Nonlinear right-hand side f(ζ, u) of eq. (1) (with Mz/Iz). Shapes (6,), (3,) → (6,)."""
     vy, vx, phi, r = zeta[StateIdx.VY], zeta[StateIdx.VX], zeta[StateIdx.PHI], zeta[StateIdx.R]
     df, dr, mz = u[InputIdx.DF], u[InputIdx.DR], u[InputIdx.MZ]
     vxs = max(vx, p.min_speed_mps)
-    af = df - (vy + p.a_m * r) / vxs
-    ar = dr - (vy - p.b_m * r) / vxs
+    wf, wr = axle_directions(vy, r, vxs, p)
+    af = df - wf
+    ar = dr - wr
     out = np.empty(N_STATE)
     out[StateIdx.VY] = 2.0 / p.mass_kg * (p.c_cf * af + p.c_cr * ar) - vx * r
     out[StateIdx.VX] = 2.0 / p.mass_kg * (
@@ -161,8 +169,7 @@ def jacobians(
     cf, cr = p.c_cf, p.c_cr
     floored = vx < p.min_speed_mps
     vxs = p.min_speed_mps if floored else vx
-    wf = (vy + a * r) / vxs
-    wr = (vy - b * r) / vxs
+    wf, wr = axle_directions(vy, r, vxs, p)
     af = df - wf
     ar = dr - wr
     # partial derivatives of the slip angles

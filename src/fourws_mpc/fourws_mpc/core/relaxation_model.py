@@ -40,7 +40,15 @@ import numpy as np
 from numba import njit
 
 from fourws_mpc.core.actuator_model import N_STATE_ACT, ActIdx
-from fourws_mpc.core.model import InputIdx, ModelParams, ModelTuple, StateIdx, as_vector, packed
+from fourws_mpc.core.model import (
+    InputIdx,
+    ModelParams,
+    ModelTuple,
+    StateIdx,
+    as_vector,
+    axle_directions,
+    packed,
+)
 
 N_STATE_RELAX = N_STATE_ACT + 2
 N_INPUT = 3
@@ -64,10 +72,9 @@ def check(p: ModelParams) -> tuple[float, float]:
 def kinematic_slip(zeta: np.ndarray, p: ModelParams) -> tuple[float, float]:
     """(α_f, α_r) of eq. (1) at the actual road-wheel angles of ζ_t (or of the actuator
     model's ζ_a: the first eight states)."""
-    vy, r = zeta[StateIdx.VY], zeta[StateIdx.R]
     vxs = max(zeta[StateIdx.VX], p.min_speed_mps)
-    return (float(zeta[ActIdx.DF_ACT] - (vy + p.a_m * r) / vxs),
-            float(zeta[ActIdx.DR_ACT] - (vy - p.b_m * r) / vxs))
+    wf, wr = axle_directions(zeta[StateIdx.VY], zeta[StateIdx.R], vxs, p)
+    return float(zeta[ActIdx.DF_ACT] - wf), float(zeta[ActIdx.DR_ACT] - wr)
 
 
 def dynamics(zeta: np.ndarray, u: np.ndarray, p: ModelParams) -> np.ndarray:
