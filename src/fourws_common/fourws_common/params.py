@@ -49,6 +49,8 @@ def check_field(cls: type, name: str, value: Any) -> Any:
     f = fields[name]
     meta = f.metadata
     default = f.default
+    if default is dataclasses.MISSING and f.type in (float, "float"):
+        default = 0.0                # a required number (a car file's): checked as one
     if isinstance(default, bool):
         if not isinstance(value, bool):
             raise ValueError(f"{name}: expected a bool, got {value!r}")

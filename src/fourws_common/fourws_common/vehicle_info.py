@@ -12,12 +12,11 @@ win over them, so a model mismatch stays an explicit override. Pure Python, no R
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from fourws_common.params import read_yaml_file
+from fourws_common.params import check_field, read_yaml_file
 
 #: The car every node uses when none is given: the paper's (Table 5).
 DEFAULT_VEHICLE = "paper"
@@ -138,15 +137,10 @@ def load_vehicle_info(name_or_path: str | Path | None = None) -> VehicleInfo:
     missing = [k for k in keys if k not in values]
     if missing:
         raise ValueError(f"{path}: missing vehicle key(s) {missing}")
-    checked: dict[str, float] = {}
-    for f in dataclasses.fields(VehicleInfo):
-        value, lo, hi = values[f.name], f.metadata["lo"], f.metadata["hi"]
-        if (isinstance(value, bool) or not isinstance(value, int | float)
-                or not math.isfinite(value) or not lo <= value <= hi):
-            raise ValueError(f"{path}: {f.name}: expected a number in [{lo}, {hi}] "
-                             f"{f.metadata['unit']}, got {value!r}")
-        checked[f.name] = float(value)
-    return VehicleInfo(**checked)
+    try:
+        return VehicleInfo(**{k: check_field(VehicleInfo, k, values[k]) for k in keys})
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
 def _mpc(v: VehicleInfo) -> dict[str, Any]:

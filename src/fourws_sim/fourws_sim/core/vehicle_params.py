@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -228,6 +228,9 @@ def load_vehicle_params(
     """
     where = vehicle_path(path)
     values = read_vehicle_file(where)
+    missing = [f.name for f in fields(VehicleParams) if f.name not in values]
+    if missing:                       # no silent default: the file is the car's one owner
+        raise ValueError(f"{where}: missing vehicle key(s) {missing}")
     recorded = {k: values.pop(k) for k in RECORDED_KEYS if k in values}
     try:
         base = from_mapping(VehicleParams, values)
