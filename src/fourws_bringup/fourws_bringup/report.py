@@ -386,8 +386,8 @@ def _draw_torques(runs: Sequence[tuple[str, Series]], path: Path, title: str) ->
         if lines:
             top.legend(lines, labels, fontsize=7, ncol=5, loc="upper right", framealpha=0.9)
     axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle(title)
     h_in = 3.2 * len(runs) + 0.6          # the figure's height: margins fixed in inches
+    fig.suptitle(title, y=1.0 - 0.15 / h_in)
     fig.subplots_adjust(left=0.1, right=0.9, bottom=0.55 / h_in, top=1.0 - 0.65 / h_in,
                         hspace=0.35)
     return _save(fig, path)
