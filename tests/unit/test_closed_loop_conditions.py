@@ -78,6 +78,39 @@ def test_bad_conditions_are_refused_naming_the_key():
         condition_from_mapping({"noise": {"y": 0.02}})
 
 
+@pytest.mark.parametrize(("raw", "key"), [
+    ({"steer_dead_time_ms": -20}, "steer_dead_time_ms"),   # made the margins' model overlap
+    ({"steer_dead_time_ms": float("nan")}, "steer_dead_time_ms"),
+    ({"steer_dead_time_ms": 5000}, "steer_dead_time_ms"),   # beyond the plant's 1 s
+    ({"delay_periods": 1.9}, "delay_periods"),              # was truncated to 1
+    ({"delay_periods": True}, "delay_periods"),
+    ({"delay_periods": None}, "delay_periods"),
+    ({"seed": -1}, "seed"),                                 # drew seed 2**32 - 1's noise
+    ({"seed": 2**32}, "seed"),                              # drew seed 0's
+    ({"mu_nominal": "high"}, "mu_nominal"),
+    ({"mpc_overrides": [1]}, "mpc_overrides"),
+])
+def test_a_bad_value_is_refused_naming_its_key(raw, key):
+    with pytest.raises(ValueError, match=key):
+        condition_from_mapping(raw)
+
+
+def test_an_integer_written_as_a_float_is_the_integer():
+    assert condition_from_mapping({"delay_periods": 2.0, "seed": 3.0}).delay_periods == 2
+
+
+def test_the_margins_refuse_a_negative_dead_time():
+    from fourws_bringup.core.configs import load_mpc_config
+    from fourws_bringup.core.margins import closed_loop
+    from fourws_sim.core.vehicle_params import load_vehicle_params
+
+    cfg, car = load_mpc_config("mpc_4ws"), load_vehicle_params()
+    with pytest.raises(ValueError, match="steer_dead_time_s"):
+        closed_loop(cfg, car, 16.7, steer_dead_time_s=-0.02)
+    with pytest.raises(ValueError, match="delay_periods"):
+        closed_loop(cfg, car, 16.7, delay_periods=-1)
+
+
 def test_vehicle_overrides_change_the_plant_not_the_controller():
     slow = condition_from_mapping({"name": "slow", "vehicle_overrides": {
         "steer_front_time_constant_s": 0.05, "steer_rear_time_constant_s": 0.05}})

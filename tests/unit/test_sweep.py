@@ -72,6 +72,27 @@ def test_bad_spec_names_the_key(tmp_path):
         load_spec(p)
 
 
+@pytest.mark.parametrize(("text", "needle"), [
+    ("seeds: 5\n", "seeds"),                                   # was a TypeError
+    ("seeds: []\n", "seeds"),                                  # was silently [0]
+    ("seeds: [-1]\n", "conditions.a: seed"),                  # aliased another seed's noise
+    ("controllers: improved\n", "controllers"),                # was 8 one-letter jobs
+    ("conditions: [a]\n", "conditions"),                       # was an AttributeError
+    ("conditions: {a: {delay_periods: 1.9}}\n", "conditions.a: delay_periods"),  # truncated
+    ("conditions: {a: {delay_periods: null}}\n", "conditions.a: delay_periods"),
+    ("conditions: {a: {mpc_overrides: [1]}}\n", "conditions.a: mpc_overrides"),
+])
+def test_a_bad_value_names_the_file_and_key(tmp_path, text, needle):
+    base = {"controllers": "controllers: [improved]\n", "scenarios": "scenarios: [dlc_60_mu05]\n",
+            "conditions": "conditions: {a: {}}\n", "seeds": ""}
+    base[text.split(":")[0]] = text
+    p = tmp_path / "bad.yaml"
+    p.write_text("".join(base.values()), encoding="utf-8")
+    with pytest.raises(ValueError, match=needle) as err:
+        load_spec(p)
+    assert str(p) in str(err.value)
+
+
 def test_groups_and_scenario_paths_relative_to_the_spec(tmp_path):
     (tmp_path / "sc").mkdir()
     src = __import__("fourws_common.resources", fromlist=["config_dir"]).config_dir(

@@ -207,6 +207,25 @@ def test_a_bad_spec_is_refused_naming_the_key(tmp_path):
     with pytest.raises(ValueError, match="speeds_kmh"):   # no loop: no candidate is checked
         tuning.load_tuning_spec(bad)
     text = SPEC.read_text(encoding="utf-8")
+    # an empty list left nothing to run, and the procedure waited for ever
+    for line, key in (("seeds: [100]", "seeds"), ("grid_exponents: [-8, -6, -4, -2, 0, 2, 4, 6]",
+                                                  "grid_exponents")):
+        assert line in text
+        bad.write_text(text.replace(line, f"{key}: []"), encoding="utf-8")
+        with pytest.raises(ValueError, match=key):
+            tuning.load_tuning_spec(bad)
+    scen = next(ln for ln in text.splitlines() if ln.startswith("scenarios:"))
+    bad.write_text(text.replace(scen, "scenarios: []"), encoding="utf-8")
+    with pytest.raises(ValueError, match="scenarios"):
+        tuning.load_tuning_spec(bad)
+    bad.write_text(text.replace("seeds: [100]", "seeds: [-3]"), encoding="utf-8")
+    with pytest.raises(ValueError, match="seed"):
+        tuning.load_tuning_spec(bad)
+    bad.write_text(text.replace("realistic: {delay_periods: 1, steer_dead_time_ms: 40}",
+                                "realistic: {delay_periods: 1, steer_dead_time_ms: -40}"),
+                   encoding="utf-8")
+    with pytest.raises(ValueError, match="steer_dead_time_ms"):
+        tuning.load_tuning_spec(bad)
     grip = text[text.index("grip:\n"):text.index("groups:")]
     for wrong in (grip.replace("conditions: [all]", "conditions: [nosuch]"),
                   grip.replace("  conditions: [all]\n", ""),

@@ -89,8 +89,12 @@ def load_spec(path: str | Path) -> list[Job]:
     if unknown:
         raise ValueError(f"{path}: unknown key(s) {unknown} (known: "
                          f"{sorted(SPEC_KEYS | {'groups'})})")
-    seeds = [int(s) for s in data.get("seeds") or [0]]
+    seeds = data.get("seeds", [0])
+    if not isinstance(seeds, list) or not seeds:
+        raise ValueError(f"{path}: seeds: a non-empty list of integers, got {seeds!r}")
     groups = data.get("groups") or [{k: data.get(k) for k in GROUP_KEYS}]
+    if not isinstance(groups, list):
+        raise ValueError(f"{path}: groups: a list of mappings of {sorted(GROUP_KEYS)}")
     jobs: list[Job] = []
     for i, g in enumerate(groups):
         where = f"{path}: groups[{i}]" if "groups" in data else str(path)
@@ -99,16 +103,28 @@ def load_spec(path: str | Path) -> list[Job]:
         for key in sorted(GROUP_KEYS):
             if not g.get(key):
                 raise ValueError(f"{where}: '{key}' is missing or empty")
+        for key in ("controllers", "scenarios"):
+            if not isinstance(g[key], list) or not all(isinstance(v, str) for v in g[key]):
+                raise ValueError(f"{where}: {key}: a list of names or files, got {g[key]!r}")
+        if not isinstance(g["conditions"], Mapping):
+            raise ValueError(f"{where}: conditions: a mapping of names to conditions")
         jobs += _product([beside(path, c) for c in g["controllers"]],
-                         [beside(path, s) for s in g["scenarios"]], g["conditions"], seeds)
+                         [beside(path, s) for s in g["scenarios"]], g["conditions"], seeds,
+                         where)
     return jobs
 
 
-def _product(controllers, scenarios, conditions: Mapping, seeds: list[int]) -> list[Job]:
+def _product(controllers, scenarios, conditions: Mapping, seeds: list, where: str = ""
+             ) -> list[Job]:
     jobs = []
     for name, raw in conditions.items():
-        raw = condition_mapping(raw)
-        base = condition_from_mapping({**raw, "name": str(name)})
+        try:
+            raw = condition_mapping(raw)
+            base = condition_from_mapping({**raw, "name": str(name)})
+            for seed in seeds:      # each checked once, whether the condition draws noise
+                condition_from_mapping({**raw, "name": str(name)}, seed=seed)
+        except ValueError as exc:
+            raise ValueError(f"{where}: conditions.{name}: {exc}") from None
         noisy = any(s.sigma > 0.0 for s in base.noise.values())
         for seed in (seeds if noisy else seeds[:1]):
             cond = condition_from_mapping({**raw, "name": str(name)}, seed=seed)

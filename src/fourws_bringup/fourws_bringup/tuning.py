@@ -108,11 +108,30 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
     unknown = sorted(set(d) - SPEC_KEYS - OPTIONAL_KEYS)
     if missing or unknown:
         raise ValueError(f"{path}: missing {missing}, unknown {unknown}")
+    for key in ("grid_exponents", "scenarios", "seeds"):   # an empty one: nothing to run
+        if not isinstance(d[key], list) or not d[key]:
+            raise ValueError(f"{path}: {key}: a non-empty list, got {d[key]!r}")
+    for key in ("conditions", "groups", "margin"):
+        if not isinstance(d[key], Mapping) or not d[key]:
+            raise ValueError(f"{path}: {key}: a non-empty mapping, got {d[key]!r}")
+    for name, g in d["groups"].items():
+        if not isinstance(g, Mapping) or not isinstance(g.get("controllers"), list) or \
+                not g["controllers"] or not isinstance(g.get("parameters"), list):
+            raise ValueError(f"{path}: groups.{name}: a mapping of a non-empty list of "
+                             "controllers and a list of parameters")
     m = d["margin"]
-    if not m.get("speeds_kmh") or not m.get("conditions"):
+    if not m.get("speeds_kmh") or not isinstance(m.get("conditions"), Mapping):
         raise ValueError(f"{path}: margin needs at least one of speeds_kmh and of conditions")
-    margin_conditions = {str(k): condition_from_mapping({"name": str(k), **(v or {})})
-                         for k, v in m["conditions"].items()}
+    try:
+        margin_conditions = {str(k): condition_from_mapping({**condition_mapping(v),
+                                                             "name": str(k)})
+                             for k, v in m["conditions"].items()}
+        for name, v in d["conditions"].items():
+            condition_from_mapping({**condition_mapping(v), "name": str(name)})
+        for seed in d["seeds"]:
+            condition_from_mapping({}, seed=seed)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     known = {f.name for f in dataclasses.fields(MpcConfig)}
     groups = []
     for name, g in d["groups"].items():
@@ -132,6 +151,8 @@ def load_tuning_spec(path: str | Path) -> TuningSpec:
         raise ValueError(f"{path}: grip is a mapping of two lists, scenarios and conditions "
                          f"(names among conditions: {sorted(map(str, d['conditions']))}), "
                          "both or neither")
+    if not all(isinstance(i, int) and not isinstance(i, bool) for i in d["grid_exponents"]):
+        raise ValueError(f"{path}: grid_exponents: integers, got {d['grid_exponents']!r}")
     return TuningSpec(tuple(int(i) for i in d["grid_exponents"]),
                       float(d["max_spectral_radius"]),
                       tuple(float(v) for v in m["speeds_kmh"]), str(m["scenario"]),
@@ -361,6 +382,8 @@ def _tune_group(spec: TuningSpec, group: Group, pool: Any, batch: int, progress:
             work = [(k0, j) for j in jobs[k0][done[k0]:done[k0] + batch]]
         else:
             work = [(k, jobs[k][done[k]]) for k in pending[:batch]]
+        if not work:                      # a candidate without runs would never complete
+            raise ValueError(f"tuning: group {group.name}: a candidate has no runs")
         run(work)
         for k in dict.fromkeys(k for k, _ in work):
             if not complete(k) and math.isfinite(score(k)) and (best is None

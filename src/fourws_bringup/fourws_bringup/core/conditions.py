@@ -26,7 +26,8 @@ from typing import Any
 from fourws_common.params import read_yaml_file
 from fourws_common.vehicle_info import vehicle_path
 from fourws_sim.core.localisation import LOCALISATION_METHODS
-from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES, NoiseSpec, noise_specs
+from fourws_sim.core.sensing import CHANNELS, MAX_SEED, TYRE_SOURCES, NoiseSpec, noise_specs
+from fourws_sim.core.simulator import MAX_STEER_DEAD_TIME_S as MAX_DEAD_TIME_S
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,12 @@ class Condition:
                              f"{self.delay_periods!r}")
         if not 0.01 <= self.mu_nominal <= 3.0:
             raise ValueError(f"mu_nominal: {self.mu_nominal} outside 0.01..3")
+        if not 0.0 <= self.steer_dead_time_s <= MAX_DEAD_TIME_S:   # False for NaN too
+            raise ValueError(f"steer_dead_time_ms: {self.steer_dead_time_s * 1e3:g} outside "
+                             f"0..{MAX_DEAD_TIME_S * 1e3:g}")
+        if not (isinstance(self.seed, int) and 0 <= self.seed <= MAX_SEED):
+            raise ValueError(f"seed: expected an integer 0..{MAX_SEED} (the noise streams "
+                             f"take 32 bits), got {self.seed!r}")
         unknown = sorted(set(self.noise) - set(CHANNELS))
         if unknown:
             raise ValueError(f"noise: unknown channel(s) {unknown}")
@@ -94,22 +101,45 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
     """From YAML: ``noise: {y: {sigma: 0.02, tau_s: 1.0}, ...}``, ``delay_periods``,
     ``steer_dead_time_ms``, ``tyre_forces``, ``mu_nominal``, ``mpc_overrides``, ``seed``,
     ``known_delays``, ``localisation``, ``vehicle``."""
+    if not isinstance(d, Mapping):
+        raise ValueError(f"condition: a mapping of {sorted(_KEYS)}, got {d!r}")
     unknown = sorted(set(d) - _KEYS)
     if unknown:
         raise ValueError(f"condition: unknown key(s) {unknown} (known: {sorted(_KEYS)})")
     return Condition(
         name=str(d.get("name", "condition")), noise=noise_specs(d.get("noise")),
-        delay_periods=int(d.get("delay_periods", 0)),
-        steer_dead_time_s=float(d.get("steer_dead_time_ms", 0.0)) * 1e-3,
+        delay_periods=_integer(d.get("delay_periods", 0), "delay_periods"),
+        steer_dead_time_s=_number(d.get("steer_dead_time_ms", 0.0), "steer_dead_time_ms") * 1e-3,
         tyre_forces=str(d.get("tyre_forces", "oracle")),
-        mu_nominal=float(d.get("mu_nominal", 0.8)),
-        mpc_overrides=dict(d.get("mpc_overrides") or {}),
-        allocator_overrides=dict(d.get("allocator_overrides") or {}),
-        vehicle_overrides=dict(d.get("vehicle_overrides") or {}),
-        seed=int(d["seed"]) if seed is None and "seed" in d else int(seed or 0),
+        mu_nominal=_number(d.get("mu_nominal", 0.8), "mu_nominal"),
+        mpc_overrides=_mapping(d.get("mpc_overrides"), "mpc_overrides"),
+        allocator_overrides=_mapping(d.get("allocator_overrides"), "allocator_overrides"),
+        vehicle_overrides=_mapping(d.get("vehicle_overrides"), "vehicle_overrides"),
+        seed=_integer(d["seed"] if seed is None and "seed" in d else (seed or 0), "seed"),
         known_delays=_flag(d.get("known_delays", False), "known_delays"),
         localisation=str(d.get("localisation", "none")),
         vehicle=str(d.get("vehicle") or ""))
+
+
+def _integer(v: Any, name: str) -> int:
+    """An integer as YAML gives it (``2``, or ``2.0``); ``ValueError`` for 1.9, true or text."""
+    if isinstance(v, bool) or not isinstance(v, int | float) or v != v or v != int(v):
+        raise ValueError(f"{name}: expected an integer, got {v!r}")
+    return int(v)
+
+
+def _number(v: Any, name: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f"{name}: expected a number, got {v!r}")
+    return float(v)
+
+
+def _mapping(v: Any, name: str) -> dict[str, Any]:
+    if v is None:
+        return {}
+    if not isinstance(v, Mapping):
+        raise ValueError(f"{name}: expected a mapping of parameter names to values, got {v!r}")
+    return dict(v)
 
 
 def _flag(v: Any, name: str) -> bool:

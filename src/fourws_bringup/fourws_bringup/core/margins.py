@@ -58,6 +58,7 @@ from fourws_mpc.core.lqr_controller import lqr_weights
 from fourws_mpc.core.model import N_INPUT, N_STATE, StateIdx, zoh
 from fourws_mpc.core.relaxation_model import N_STATE_RELAX, RelaxIdx, observer_state_space
 from fourws_sim.core.actuators import motor_state_space
+from fourws_sim.core.simulator import MAX_STEER_DEAD_TIME_S
 from fourws_sim.core.vehicle_params import VehicleParams
 
 #: plant state indices
@@ -184,6 +185,12 @@ def closed_loop(cfg: MpcConfig, v: VehicleParams, vx: float, *, delay_periods: i
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(A_cl, A_open, B_f, K_f): the closed-loop matrix per period, and the loop broken at
     the front steer command (x+ = A_open x + B_f w, the controller's front steer = K_f x)."""
+    if isinstance(delay_periods, bool) or not isinstance(delay_periods, int) or not (
+            0 <= delay_periods <= 100):
+        raise ValueError(f"delay_periods: an integer 0..100, got {delay_periods!r}")
+    if not 0.0 <= steer_dead_time_s <= MAX_STEER_DEAD_TIME_S:     # False for NaN too
+        raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} outside "
+                         f"0..{MAX_STEER_DEAD_TIME_S:g} s")
     dt = cfg.dt_s
     Ap, Bp = zoh(*plant_matrices(v, vx, relaxation), dt)
     n_dead = int(round(steer_dead_time_s / dt))

@@ -52,8 +52,12 @@ class NoiseSpec:
             raise ValueError(f"noise tau_s: expected a finite value >= 0, got {self.tau_s!r}")
 
 
+#: the largest noise seed: a stream takes 32 bits of it
+MAX_SEED = 2**32 - 1
+
+
 def _channel_seed(seed: int, name: str) -> np.random.SeedSequence:
-    return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(name.encode())])
+    return np.random.SeedSequence([int(seed) & MAX_SEED, zlib.crc32(name.encode())])
 
 
 class NoiseChannel:

@@ -53,6 +53,10 @@ _POSE = slice(int(State.X), int(State.YAW) + 1)
 _STEER = slice(int(State.STEER_FRONT), int(State.STEER_REAR) + 1)
 
 
+#: the longest steering dead time the plant takes, s
+MAX_STEER_DEAD_TIME_S = 1.0
+
+
 class Simulator:
     """Fixed-step RK4 plant. See the module docstring.
 
@@ -73,8 +77,10 @@ class Simulator:
     ) -> None:
         if not (math.isfinite(substep_s) and 1e-5 <= substep_s <= 0.01):
             raise ValueError(f"substep_s: {substep_s} is outside [1e-05, 0.01] s")
-        if not (math.isfinite(steer_dead_time_s) and 0.0 <= steer_dead_time_s <= 1.0):
-            raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} is outside [0, 1] s")
+        if not (math.isfinite(steer_dead_time_s)
+                and 0.0 <= steer_dead_time_s <= MAX_STEER_DEAD_TIME_S):
+            raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} is outside "
+                             f"[0, {MAX_STEER_DEAD_TIME_S:g}] s")
         n_dead = round(steer_dead_time_s / substep_s)
         if abs(n_dead * substep_s - steer_dead_time_s) > 1e-9:
             raise ValueError(f"steer_dead_time_s: {steer_dead_time_s} s is not a multiple of "
