@@ -136,3 +136,49 @@ def test_allocator_node_combines_three_stamped_inputs(graph, ros, method):
     assert np.all(np.isfinite(out.torque))
     np.testing.assert_allclose(out.torque, got[4 * 10_000_000].torque)
     assert out.allocation.endswith(":held")
+
+
+def test_allocator_strays_from_the_future_never_crowd_out_the_current_step(graph, ros):
+    """A stray publisher's commands stamped ahead of the run fill the allocator's store; the
+    current step's inputs must still be answered (the store once dropped its oldest entry,
+    the current step's, and the run then timed out)."""
+    from fourws_torque_alloc.allocator_node import MAX_HELD
+
+    graph([NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
+                    params_files=[str(CFG / "allocator.yaml")])])
+    got: dict[int, WheelTorques] = {}
+    ros.node.create_subscription(WheelTorques, "/control/wheel_torques",
+                                 lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+    pubs = {t: ros.node.create_publisher(c, n, CONTROL_QOS) for t, c, n in (
+        ("s", VehicleState, "/vehicle/state"), ("d", DriveCommand, "/control/drive_command"),
+        ("m", MpcCommand, "/control/mpc_command"))}
+    assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+
+    def step(k: int) -> None:
+        d, m = DriveCommand(force=100.0, torque=27.0), MpcCommand(yaw_moment=10.0)
+        d.header.stamp = m.header.stamp = ns_to_stamp(k * 10_000_000)
+        pubs["m"].publish(m)
+        pubs["d"].publish(d)
+        pubs["s"].publish(_state(k, 16.0, [2000.0] * 4, [0.0] * 4, [0.8] * 4))
+
+    step(0)
+    assert ros.spin_until(lambda: 0 in got, 10.0)
+    d = DriveCommand(force=100.0, torque=27.0)
+    d.header.stamp = ns_to_stamp(1_000 * 10_000_000)
+    pubs["d"].publish(d)                       # the first stray, then the current step's
+    for k in (1, 2):                           # drive command, then more strays: the store
+        d = DriveCommand(force=100.0, torque=27.0)          # overflows after it arrived
+        d.header.stamp = ns_to_stamp(k * 10_000_000)
+        pubs["d"].publish(d)
+        for j in range(MAX_HELD // 2 + 5):
+            s = DriveCommand(force=100.0, torque=27.0)
+            s.header.stamp = ns_to_stamp((1_001 + 200 * k + j) * 10_000_000)
+            pubs["d"].publish(s)
+        m = MpcCommand(yaw_moment=10.0)
+        m.header.stamp = ns_to_stamp(k * 10_000_000)
+        pubs["m"].publish(m)
+        pubs["s"].publish(_state(k, 16.0, [2000.0] * 4, [0.0] * 4, [0.8] * 4))
+        assert ros.spin_until(lambda k=k: k * 10_000_000 in got, 10.0), f"step {k} not answered"
+    step(3)
+    assert ros.spin_until(lambda: 3 * 10_000_000 in got, 10.0)

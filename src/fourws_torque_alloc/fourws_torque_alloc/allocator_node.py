@@ -191,8 +191,13 @@ class AllocatorNode(Node):
                                f"stamped {stamp_ns} ns: already past step {self.last_stamp_ns}")
             return
         store[stamp_ns] = msg
-        if len(store) > MAX_HELD:  # strays that no state will ever match
-            del store[min(store)]
+        if len(store) > MAX_HELD:  # strays that no state will ever match: the one farthest
+            ref = self.gate.last_ns if self.gate.last_ns is not None else stamp_ns
+            far = max(store, key=lambda k: abs(k - ref))   # from the newest state goes
+            del store[far]
+            self.health.reject("stray_input", far, f"dropped a {type(msg).__name__} "
+                               f"stamped {far} ns: {MAX_HELD} held and none matched by a "
+                               f"state (the newest is {ref} ns)")
         self._answer_held(stamp_ns)
 
     def _answer_held(self, stamp_ns: int) -> None:
