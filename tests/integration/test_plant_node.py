@@ -109,9 +109,11 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     assert refs and len(refs[0].x) == len(refs[0].speed) > 100
 
 
-def test_a_runtime_scenario_that_does_not_load_is_refused_naming_it(graph, ros):
+def test_a_runtime_scenario_or_timing_change_is_refused_naming_it(graph, ros):
     """``ros2 param set /plant_node scenario nope`` answers unsuccessful with the reason, and
-    the plant keeps its scenario; a scenario that loads is accepted (issue 41, item 7)."""
+    the plant keeps its scenario. What the run is built from is fixed at start (one run per
+    plant process): another scenario, dt_s or mode is refused too, the same value accepted,
+    and an abort limit applies."""
     from rcl_interfaces.srv import GetParameters, SetParameters
     from rclpy.parameter import Parameter
 
@@ -138,6 +140,15 @@ def test_a_runtime_scenario_that_does_not_load_is_refused_naming_it(graph, ros):
     bad = set_scenario("nope")
     assert not bad.successful and "nope" in bad.reason, bad
     assert scenario() == "dlc_60_mu05"
-    good = set_scenario("dlc_90_mu06")
-    assert good.successful, good
-    assert scenario() == "dlc_90_mu06"
+    other = set_scenario("dlc_90_mu06")
+    assert not other.successful and "fixed at start" in other.reason, other
+    assert scenario() == "dlc_60_mu05"
+    assert set_scenario("dlc_60_mu05").successful          # a dump loaded back: no change
+    for name, value in (("dt_s", 0.02), ("mode", "realtime")):
+        req = SetParameters.Request(parameters=[Parameter(name, value=value)
+                                                .to_parameter_msg()])
+        res = call(set_cli, req).results[0]
+        assert not res.successful and name in res.reason, (name, res)
+    req = SetParameters.Request(parameters=[Parameter("abort_sideslip_deg", value=25.0)
+                                            .to_parameter_msg()])
+    assert call(set_cli, req).results[0].successful

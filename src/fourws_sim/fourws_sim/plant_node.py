@@ -99,12 +99,20 @@ from fourws_sim.plant_messages import fill_imu, fill_odom, reference_messages
 START_CHECK_PERIOD_S = 0.01
 
 
+#: the parameters the run is built from at start (the others apply from the next step)
+START_ONLY = ("scenario", "mode", "dt_s", "substep_s", "republish_period_s", "status_period_s",
+              "noise_sigma", "noise_tau_s", "noise_seed", "delay_periods", "steer_dead_time_s",
+              "tyre_forces", "localisation", "vehicle_file", "vehicle_overrides",
+              "publish_ground_truth", "publish_standard_sensors")
+
+
 class PlantNode(Node):
     """Wires the plant core to topics; all physics is in fourws_sim.core."""
 
     def __init__(self) -> None:
         super().__init__("plant_node")
         self.params = ParamBinding(self, PlantNodeConfig, on_change=self._on_params)
+        self._start_cfg = self.params.config
         cfg = self.params.config
         self.scenario = load_scenario(cfg.scenario, vehicle=cfg.vehicle_file or None
                                       ).with_vehicle_overrides(cfg.vehicle_overrides)
@@ -211,13 +219,16 @@ class PlantNode(Node):
 
     # -- parameters ----------------------------------------------------------------------
     def _on_params(self, cfg: PlantNodeConfig) -> None:
-        # a scenario or vehicle override that would not load is refused now (ValueError:
-        # ParamBinding answers the set as failed, naming why), not at the next run
-        load_scenario(cfg.scenario, vehicle=cfg.vehicle_file or None).with_vehicle_overrides(
-            cfg.vehicle_overrides)
+        # What the run was built from is fixed: the plant runs one scenario per process, so a
+        # change would never apply (dt_s or mode changed mid-run once broke the run). A
+        # ValueError makes ParamBinding answer the set as failed, naming why.
+        fixed = [f"{n} = {getattr(cfg, n)!r}" for n in START_ONLY
+                 if getattr(cfg, n) != getattr(self._start_cfg, n)]
+        if fixed:
+            raise ValueError(f"{', '.join(fixed)}: fixed at start (one run per plant "
+                             "process): restart the plant to change it")
         self.abort = AbortLimits.of(cfg.abort_lateral_error_m, cfg.abort_sideslip_deg)
-        self.get_logger().info("parameters updated: abort limits apply now; scenario, mode "
-                               "and timing apply to the next run")
+        self.get_logger().info("parameters updated: they apply from the next step")
 
     # -- inputs --------------------------------------------------------------------------
     def _valid_cmd(self, msg: MpcCommand) -> bool:
