@@ -40,7 +40,7 @@ def main() -> int:
         wall = args.from_csv * 60.0
     else:
         t0 = time.monotonic()
-        rc = subprocess.call(["fourws", "sweep", str(spec), "--out", args.out,
+        rc = subprocess.call(["fourws", "sweep", str(spec), "--out", args.out, "--force",
                               "--workers", str(args.workers)])
         if rc != 0:
             return rc

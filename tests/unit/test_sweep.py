@@ -208,3 +208,77 @@ def test_the_limit_bench_spec_loads_every_scenario_and_covers_the_issue():
         set(range(5))
     for name in {j.scenario for j in jobs}:
         load_scenario(name)
+
+
+def _fake_rows(monkeypatch, stop_at: int, exc: BaseException):
+    """run_job answering a row per job until job ``stop_at``, which raises ``exc``."""
+    import fourws_bringup.sweep as sweep
+
+    calls = []
+
+    def fake(job):
+        calls.append(job)
+        if len(calls) > stop_at:
+            raise exc
+        return {**dict(zip(sweep.LEAD, job.key, strict=True)), "completed": True,
+                "max_abs_lateral_error_m": 0.01 * len(calls)}
+
+    monkeypatch.setattr(sweep, "run_job", fake)
+
+
+def test_an_existing_folder_is_refused_and_force_replaces_only_a_sweep(tmp_path, monkeypatch,
+                                                                        capsys):
+    from fourws_bringup.sweep import sweep_cli
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SPEC, encoding="utf-8")
+    out = tmp_path / "out"
+    _fake_rows(monkeypatch, 99, RuntimeError())
+    assert sweep_cli(str(spec), str(out), 1) == 0
+    first = (out / "results.csv").read_text(encoding="utf-8")
+    assert sweep_cli(str(spec), str(out), 1) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (out / "results.csv").read_text(encoding="utf-8") == first
+    assert sweep_cli(str(spec), str(out), 1, force=True) == 0
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep me", encoding="utf-8")
+    assert sweep_cli(str(spec), str(other), 1, force=True) == 2
+    assert (other / "notes.txt").read_text(encoding="utf-8") == "keep me"
+
+
+@pytest.mark.parametrize(("exc", "code"), [(KeyboardInterrupt(), 130),
+                                           (RuntimeError("a worker died"), 1)])
+def test_an_interrupted_sweep_keeps_the_rows_it_finished(tmp_path, monkeypatch, capsys, exc,
+                                                         code):
+    import json
+
+    from fourws_bringup.sweep import JOURNAL, sweep_cli
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SPEC, encoding="utf-8")
+    out = tmp_path / "out"
+    _fake_rows(monkeypatch, 3, exc)
+    assert sweep_cli(str(spec), str(out), 1) == code
+    assert "3 finished rows" in capsys.readouterr().err
+    rows = [json.loads(line) for line in (out / JOURNAL).read_text(encoding="utf-8")
+            .splitlines()]
+    assert [r["job"] for r in rows] == [0, 1, 2]
+    assert [r["max_abs_lateral_error_m"] for r in rows] == [0.01, 0.02, 0.03]
+    assert not (out / "results.csv").exists()
+
+
+def test_a_failed_csv_write_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    path = tmp_path / "results.csv"
+    rows = [{"controller": "a", "scenario": "s", "condition": "c", "seed": 0, "x": 1.0}] * 3
+    write_csv(rows, path)
+    before = path.read_text(encoding="utf-8")
+
+    def full_disk(self, row):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(csv.DictWriter, "writerow", full_disk)
+    with pytest.raises(OSError):
+        write_csv(rows[:1], path)
+    assert path.read_text(encoding="utf-8") == before
+    assert [p.name for p in tmp_path.iterdir()] == ["results.csv"]

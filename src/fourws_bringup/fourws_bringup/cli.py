@@ -9,7 +9,7 @@
     fourws bag recover BAG_OR_FILE.mcap [--out FIXED.mcap]
     fourws margins --controller NAME --scenario NAME_OR_YAML [--speed-kmh V]
                    [--delay-periods N] [--steer-dead-time-ms D] [--no-relaxation]
-    fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler tcp://HOST:8786]
+    fourws sweep SPEC.yaml --out DIR [--force] [--workers N | --scheduler tcp://HOST:8786]
     fourws tune SPEC.yaml [--workers N] [--check] [--report FILE] [--presets DIR]
                 [--group NAME ...]
     fourws scenarios | fourws controllers
@@ -161,7 +161,7 @@ def _cmd_margins(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import sweep_cli
 
-    return sweep_cli(args.spec, args.out, args.workers, args.scheduler)
+    return sweep_cli(args.spec, args.out, args.workers, args.scheduler, force=args.force)
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
@@ -281,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "in-process loop: results.csv and summary.md")
     w.add_argument("spec", help="sweep spec YAML (see fourws_bringup.sweep)")
     w.add_argument("--out", required=True, help="output folder")
+    w.add_argument("--force", action="store_true", help="replace an existing sweep folder")
     w.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     w.add_argument("--scheduler", default=None, help="run on the Dask distributed cluster of "
                    "this scheduler address (e.g. tcp://host:8786) instead of local processes")

@@ -35,10 +35,12 @@ delay and dead time.
 from __future__ import annotations
 
 import csv
+import json
 import math
+import os
 import sys
 import traceback
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -211,11 +213,13 @@ def activity(log: Any) -> dict[str, float]:
 
 
 def run_sweep(jobs: list[Job], workers: int = 1, progress: bool = True,
-              scheduler: str | None = None, connect_timeout_s: float = 30.0
+              scheduler: str | None = None, connect_timeout_s: float = 30.0,
+              on_row: Callable[[int, dict[str, Any]], None] | None = None
               ) -> list[dict[str, Any]]:
     """Every job's row, in job order; ``workers`` local processes, or the workers of the
-    Dask distributed scheduler at ``scheduler`` (an address such as ``tcp://host:8786``)."""
-    rows: dict[int, dict[str, Any]] = {}
+    Dask distributed scheduler at ``scheduler`` (an address such as ``tcp://host:8786``).
+    ``on_row(i, row)`` is called as each job's row arrives (the CLI's journal)."""
+    rows = _Rows(on_row)
     if scheduler:
         from distributed import Client
         from distributed import as_completed as dask_completed
@@ -242,6 +246,19 @@ def run_sweep(jobs: list[Job], workers: int = 1, progress: bool = True,
     return [rows[i] for i in range(len(jobs))]
 
 
+class _Rows(dict):
+    """The rows by job index, each handed to ``on_row`` as it is stored."""
+
+    def __init__(self, on_row: Callable[[int, dict[str, Any]], None] | None) -> None:
+        super().__init__()
+        self._on_row = on_row
+
+    def __setitem__(self, i: int, row: dict[str, Any]) -> None:
+        super().__setitem__(i, row)
+        if self._on_row is not None:
+            self._on_row(i, row)
+
+
 def _key(job: Job) -> str:
     return "-".join(str(k) for k in job.key).replace("/", "_")
 
@@ -258,11 +275,16 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
     keys: list[str] = list(LEAD)
     for r in rows:
         keys += [k for k in r if k not in keys and k != "traceback"]
-    with path.open("w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: _cell(r.get(k)) for k in keys})
+    tmp = path.with_name(path.name + ".tmp")    # a full disk never truncates the old file
+    try:
+        with tmp.open("w", newline="", encoding="utf-8") as f:
+            w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: _cell(r.get(k)) for k in keys})
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _parse(v: str) -> Any:
@@ -342,26 +364,69 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: the rows of a sweep as they finish, one JSON object a line, until results.csv is written
+JOURNAL = "rows.partial.jsonl"
+#: what a sweep writes in its folder (``--force`` replaces only such a folder)
+SWEEP_FOLDER_ENTRIES = ("results.csv", "summary.md", JOURNAL)
+
+
+def sweep_folder_problem(path: Path) -> str | None:
+    """Why ``path`` is not a sweep's output folder (None if it is)."""
+    other = sorted(p.name for p in path.iterdir() if p.name not in SWEEP_FOLDER_ENTRIES)
+    return f"it holds {other[:5]}" if other else None
+
+
 def sweep_cli(spec: str, out: str, workers: int, scheduler: str | None = None,
-              connect_timeout_s: float = 30.0) -> int:
-    """``fourws sweep``."""
+              connect_timeout_s: float = 30.0, force: bool = False) -> int:
+    """``fourws sweep``: refuses an existing output folder unless ``force``; each finished
+    row goes to :data:`JOURNAL` at once, so an interrupted or failed sweep keeps them."""
+    from .outputs import RunError, prepare_out_dir
+
     try:
         jobs = load_spec(spec)
         out_dir = Path(out)
+        prepare_out_dir(out_dir, force, problem=sweep_folder_problem,
+                        what="fourws sweep folder (" + ", ".join(SWEEP_FOLDER_ENTRIES) + ")")
         out_dir.mkdir(parents=True, exist_ok=True)
-    except (ValueError, OSError) as exc:
+        journal = (out_dir / JOURNAL).open("w", encoding="utf-8")
+    except (ValueError, OSError, RunError) as exc:
         print(f"fourws sweep: {exc}", file=sys.stderr)
         return 2
+    done = 0
+
+    def keep(i: int, row: dict[str, Any]) -> None:
+        nonlocal done
+        journal.write(json.dumps({"job": i, **row}, default=str) + "\n")
+        journal.flush()
+        done += 1
+
+    kept = f"the {{}} finished rows of {len(jobs)} are kept in {out_dir / JOURNAL}"
+    with journal:
+        try:
+            rows = run_sweep(jobs, workers, scheduler=scheduler,
+                             connect_timeout_s=connect_timeout_s, on_row=keep)
+        except KeyboardInterrupt:
+            print(f"\nfourws sweep: interrupted; {kept.format(done)}", file=sys.stderr)
+            return 130
+        except OSError as exc:  # no scheduler at that address, or the journal's disk
+            if scheduler and not done:
+                print(f"fourws sweep: scheduler {scheduler}: {exc}", file=sys.stderr)
+                return 2
+            print(f"fourws sweep: {exc}; {kept.format(done)}", file=sys.stderr)
+            return 1
+        except Exception as exc:  # noqa: BLE001 - a worker killed: what finished is kept
+            print(f"fourws sweep: {type(exc).__name__}: {exc}; {kept.format(done)}",
+                  file=sys.stderr)
+            return 1
     try:
-        rows = run_sweep(jobs, workers, scheduler=scheduler,
-                         connect_timeout_s=connect_timeout_s)
-    except OSError as exc:  # no scheduler at that address
-        print(f"fourws sweep: scheduler {scheduler}: {exc}", file=sys.stderr)
-        return 2
-    write_csv(rows, out_dir / "results.csv")
-    (out_dir / "summary.md").write_text(
-        f"# Sweep of {Path(spec).name}: {len(rows)} runs\n\n" + summary_markdown(rows, jobs),
-        encoding="utf-8")
+        write_csv(rows, out_dir / "results.csv")
+        (out_dir / "summary.md").write_text(
+            f"# Sweep of {Path(spec).name}: {len(rows)} runs\n\n" + summary_markdown(rows, jobs),
+            encoding="utf-8")
+    except OSError as exc:
+        print(f"fourws sweep: {exc}; {kept.format(done)}", file=sys.stderr)
+        return 1
+    (out_dir / JOURNAL).unlink(missing_ok=True)
     failed = sum(1 for r in rows if raised(r))
     print(f"{len(rows)} runs, {failed} raised; {out_dir / 'results.csv'}, "
           f"{out_dir / 'summary.md'}")
