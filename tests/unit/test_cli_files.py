@@ -382,3 +382,20 @@ def test_metrics_name_the_scenario_file_and_its_content_hash(tmp_path):
     assert a["scenario_file"].endswith("dlc_60_mu05.yaml") and b["scenario_file"] == str(copy)
     assert a["scenario_sha256"] == hashlib.sha256(shipped.source.read_bytes()).hexdigest()
     assert a["scenario_sha256"] != b["scenario_sha256"]
+
+
+def test_report_keeps_what_the_bag_cannot_give_and_rescores_the_rest(tmp_path):
+    """``fourws report`` on a run folder rewrote metrics.json from the bag alone and lost the
+    run's condition, seed, layout and records; it keeps them now, the scores recomputed."""
+    run = tmp_path / "run"
+    write_bag(run / "bag", steps=40)
+    live = {"condition": "realistic", "seed": 3, "compose": "all", "died": "mpc_node",
+            "max_abs_lateral_error_m": 99.0}
+    (run / "metrics.json").write_text(json.dumps(live), encoding="utf-8")
+    metrics = report_path(run)
+    on_disk = strict_loads((run / "metrics.json").read_text())
+    for key in ("condition", "seed", "compose", "died"):
+        assert metrics[key] == on_disk[key] == live[key], key
+    assert metrics["max_abs_lateral_error_m"] != 99.0
+    assert metrics["max_abs_lateral_error_m"] == report_path(run / "bag", tmp_path / "o")[
+        "max_abs_lateral_error_m"]

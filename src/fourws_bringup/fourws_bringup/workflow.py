@@ -138,8 +138,13 @@ def _prefetch_scoring(plots: bool) -> None:
 def report_path(path: Path, out: Path | None = None) -> dict:
     """``fourws report``: metrics.json and figures recomputed from a bag or run folder.
 
-    A ``RunError`` (before the bag is read) when ``out`` cannot be written.
+    What the bag alone cannot give (the run's condition, seed, process layout, the scenario's
+    and the car's records, the limit metrics, a dead node) is kept from the folder's
+    metrics.json, the recomputed scores over it. A ``RunError`` (before the bag is read)
+    when ``out`` cannot be written; a figure that fails is said, the metrics still written.
     """
+    import json
+
     from .bag.run_data import read_run
     from .outputs import writable_dir
     from .report import draw_figures
@@ -149,7 +154,15 @@ def report_path(path: Path, out: Path | None = None) -> dict:
         raise FileNotFoundError(f"{path}: no such bag or run folder")
     out = out or (path if (path / "bag").is_dir() else path.parent)
     writable_dir(out)
-    metrics = score_run(path)
+    kept: dict = {}
+    try:
+        kept = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        pass                                      # none yet, or unreadable: scores alone
+    metrics = {**(kept if isinstance(kept, dict) else {}), **score_run(path)}
     write_metrics(out, metrics)
-    draw_figures(read_run(path), out / "plots")
+    try:
+        draw_figures(read_run(path), out / "plots")
+    except Exception as exc:  # noqa: BLE001 - the metrics are written; the figures are said
+        print(f"[fourws] figures failed: {exc}", file=sys.stderr)
     return metrics
