@@ -137,3 +137,31 @@ def test_latest_sync_rejects_a_stale_imu(graph, ros):
     pubs[0].publish(_inputs(20)[0])                             # 200 ms after the IMU
     assert ros.spin_until(lambda: counts.get("stale_imu", 0) >= 1, 10.0), counts
     assert 200_000_000 not in states, "a state from an IMU 200 ms old"
+
+
+def test_latest_sync_rejects_an_imu_stamped_ahead_of_the_odometry(graph, ros):
+    """An IMU on another clock, stamped ahead of the odometry, had a negative age and was
+    reused for every state; beyond max_age_s either way it is refused."""
+    graph([NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
+                    params_files=[str(config_dir("fourws_bringup") / "adapter.yaml")],
+                    parameters={"sync": "latest", "max_age_s": 0.05})])
+    states: dict[int, VehicleState] = {}
+    counts: dict[str, int] = {}
+    ros.node.create_subscription(VehicleState, "/vehicle/state",
+                                 lambda m: states.setdefault(stamp_to_ns(m.header.stamp), m),
+                                 CONTROL_QOS)
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics",
+        lambda msg: [counts.update({kv.key: int(kv.value) for kv in st.values})
+                     for st in msg.status if st.name.endswith("adapter_node")],
+        DIAGNOSTICS_QOS)
+    pubs = [ros.node.create_publisher(cls, topic, CONTROL_QOS) for cls, topic in (
+        (Odometry, "/vehicle/odom"), (Imu, "/vehicle/imu"), (JointState, "/vehicle/joint_states"))]
+    assert ros.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0)
+    pubs[1].publish(_inputs(100)[1])                             # 1 s ahead of the odometry
+    pubs[2].publish(_inputs(0)[2])
+    assert ros.spin_until(lambda: all(p.wait_for_all_acked(Duration(seconds=0))
+                                      for p in pubs[1:]), 10.0)
+    pubs[0].publish(_inputs(0)[0])
+    assert ros.spin_until(lambda: counts.get("stale_imu", 0) >= 1, 10.0), counts
+    assert 0 not in states, "a state from an IMU 1 s ahead of its odometry"

@@ -88,3 +88,19 @@ def test_adapter_yaml_mirrors_the_defaults_and_string_lists_are_checked():
         check_field(AdapterConfig, "wheel_joints", [1.0, 2.0])
     with pytest.raises(ValueError, match="wheel_joints"):
         from_mapping(AdapterConfig, {**values, "wheel_joints": ["a", "b"]})
+
+
+@pytest.mark.parametrize(("twist", "imu", "position", "velocity", "needle"), [
+    ((16.0, 0.0, 0.0), (0.0, 1e308, 0.0), [0] * 6, [0] * 6, "ax"),     # made the loads inf
+    ((1e300, 0.0, 0.0), (0.0, 0.0, 0.0), [0] * 6, [0] * 6, "vx"),
+    ((16.0, 0.0, 0.0), (50.0, 0.0, 0.0), [0] * 6, [0] * 6, "yaw_rate"),
+    ((16.0, 0.0, 0.0), (0.0, 0.0, 0.0), [4.0, 0, 0, 0, 0, 0], [0] * 6, "steer_front"),
+    ((16.0, 0.0, 0.0), (0.0, 0.0, 0.0), [0] * 6, [0, 0, 1e9, 0, 0, 0], "wheel_speed"),
+])
+def test_a_finite_but_absurd_measurement_is_refused_naming_it(twist, imu, position, velocity,
+                                                               needle):
+    est = TyreEstimator(EstimatorParams.from_mapping({**read_vehicle_file(),
+                                                      "mu_nominal": 0.7}))
+    with pytest.raises(ValueError, match=f"implausible {needle}"):
+        controller_input((0, 0, 0, 0, 0, 0, 1), twist, imu,
+                         (list(JOINT_NAMES), position, velocity), JointMap(), est)

@@ -131,8 +131,9 @@ class AdapterNode(Node):
         for kind in ("imu", "joints"):
             m = self._latest.get(kind)
             age_s = None if m is None else (stamp - stamp_to_ns(m.header.stamp)) * 1e-9
-            if age_s is None or age_s > cfg.max_age_s:
-                what = "none yet" if age_s is None else f"{age_s * 1e3:.0f} ms old"
+            if age_s is None or abs(age_s) > cfg.max_age_s:   # ahead of the odometry too
+                what = ("none yet" if age_s is None else f"{age_s * 1e3:.0f} ms old" if age_s > 0
+                        else f"{-age_s * 1e3:.0f} ms ahead")
                 self.health.reject(f"stale_{kind}", stamp, f"odometry at {stamp} ns: {kind} "
                                    f"{what} (limit {cfg.max_age_s * 1e3:.0f} ms): no state")
                 return

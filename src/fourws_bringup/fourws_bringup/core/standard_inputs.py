@@ -30,9 +30,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
+from fourws_common.input_guard import implausible_fields
 from fourws_common.wheels import STEER_JOINTS, WHEEL_JOINTS
 from fourws_sim.core.plant_io import PlantOutputs
 from fourws_torque_alloc.core.tyre_estimate import TyreEstimator
@@ -109,6 +111,11 @@ def controller_input(pose: tuple[float, float, float, float, float, float, float
     steer_f, steer_r, wheels = joint_map.read(*joints)
     if not all(math.isfinite(v) for v in (steer_f, steer_r, *wheels)):
         raise ValueError("non-finite joint position or velocity")
+    bad = implausible_fields(SimpleNamespace(**named, steer_front=steer_f, steer_rear=steer_r,
+                                             wheel_speed=wheels), (*named, "steer_front",
+                                                                   "steer_rear", "wheel_speed"))
+    if bad:          # finite but absurd (an IMU's 1e308 m/s² made the tyre estimate inf)
+        raise ValueError(f"implausible {', '.join(bad)}")
     fz, fy, mu = estimator.estimate(ax, ay)
     return PlantOutputs(t_s, x, y, yaw, vx, vy, named["yaw_rate"], ax, ay, math.atan2(vy, vx),
                         steer_f, steer_r, wheels, np.zeros(4), np.zeros(4), fy, fz, mu)
