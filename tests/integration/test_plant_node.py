@@ -9,11 +9,12 @@ import time
 import numpy as np
 import pytest
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import String
 
 from fourws_bringup.supervisor import NodeSpec
 from fourws_common.conversions import stamp_to_ns
-from fourws_common.qos import CONTROL_QOS, LATCHED_QOS
+from fourws_common.qos import CONTROL_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from fourws_common.resources import config_dir
 from fourws_msgs.msg import MpcCommand, ReferenceTrajectory, VehicleState, WheelTorques
 
@@ -68,6 +69,13 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
                                  lambda m: status.append(json.loads(m.data)), LATCHED_QOS)
     ros.node.create_subscription(ReferenceTrajectory, "/reference/trajectory", refs.append,
                                  LATCHED_QOS)
+    counts: dict[str, int] = {}          # the plant's rejections, as /diagnostics says them
+    ros.node.create_subscription(
+        DiagnosticArray, "/diagnostics",
+        lambda msg: [counts.update({kv.key: int(kv.value) for kv in st.values
+                                    if kv.value.isdigit()})
+                     for st in msg.status if st.name.endswith("plant_node")],
+        DIAGNOSTICS_QOS)
     assert ros.spin_until(lambda: status and status[-1]["state"] == "ended", 60.0), \
         f"run did not end; got {len(states)} states"
     # the final state and the final status travel on two topics with no order between them:
@@ -77,6 +85,7 @@ def test_plant_completes_a_scenario_answered_over_topics_and_rejects_nan(graph, 
     end = status[-1]
     assert end["completed"], end
     assert end["steps"] == 100 and end["rejected_commands"] >= 3
+    assert ros.spin_until(lambda: counts.get("rejected_command", 0) >= 3, 10.0), counts
     # heartbeats while running: progress in steps, simulated and wall time (the runner's
     # progress line and nothing else per step)
     # start-up (state 0 until its fourth publication) is reported apart and left out of the

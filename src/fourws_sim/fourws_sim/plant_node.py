@@ -99,6 +99,9 @@ from fourws_sim.plant_messages import fill_imu, fill_odom, reference_messages
 START_CHECK_PERIOD_S = 0.01
 
 
+#: the /diagnostics kind of a command refused as not finite or beyond COMMAND_LIMITS
+REJECTED_COMMAND = "rejected_command"
+
 #: the parameters the run is built from at start (the others apply from the next step)
 START_ONLY = ("scenario", "mode", "dt_s", "substep_s", "republish_period_s", "status_period_s",
               "noise_sigma", "noise_tau_s", "noise_seed", "delay_periods", "steer_dead_time_s",
@@ -148,7 +151,6 @@ class PlantNode(Node):
         self.last_progress = time.monotonic()
         self.last_publish = time.monotonic()
         log = self.get_logger()
-        self.reject_log = RateLimitedLog(log.warning)
         self.stamp_log = RateLimitedLog(log.warning)
         self.clip_log = RateLimitedLog(log.warning)
         self.late_log = RateLimitedLog(log.warning)
@@ -236,8 +238,9 @@ class PlantNode(Node):
                                  COMMAND_LIMITS)
         if not bad:
             return True
-        self.reject_log(self._now_ns(), f"rejected mpc_command: {', '.join(bad)}; holding "
-                        f"the last valid steer command {self.steer_cmd}")
+        self.health.reject(REJECTED_COMMAND, self._now_ns(), f"rejected mpc_command: "
+                           f"{', '.join(bad)}; holding the last valid steer command "
+                           f"{self.steer_cmd}")
         return False
 
     def _valid_torques(self, msg: WheelTorques) -> np.ndarray | None:
@@ -248,8 +251,8 @@ class PlantNode(Node):
                implausible_fields(SimpleNamespace(torque=t), ("torque",), COMMAND_LIMITS))
         if not bad:
             return t
-        self.reject_log(self._now_ns(), f"rejected wheel_torques: {', '.join(bad)}; "
-                        f"holding the last valid torques")
+        self.health.reject(REJECTED_COMMAND, self._now_ns(), f"rejected wheel_torques: "
+                           f"{', '.join(bad)}; holding the last valid torques")
         return None
 
     def _command_stamp(self, msg: Any, what: str, held_ns: int | None) -> int | None:
@@ -260,16 +263,16 @@ class PlantNode(Node):
             return None
         stamp = stamp_to_ns(msg.header.stamp)
         now = self.step_k * self.dt_ns
+        if stamp > now:            # no controller answers a state not yet published
+            self.health.reject("future_stamp", self._now_ns(), f"ignored {what} stamped "
+                               f"{stamp} ns: ahead of the plant (step {self.step_k})")
+            return None
         if self.params.config.mode != "realtime":
-            if stamp != now:
+            if stamp != now:       # an answer to a state republished before the step: a repeat
                 self.stamp_log(self._now_ns(), f"ignored {what} stamped {stamp} ns while at "
                                f"step {self.step_k}")
                 return None
             return stamp
-        if stamp > now:
-            self.stamp_log(self._now_ns(), f"ignored {what} stamped {stamp} ns: ahead of the "
-                           f"plant (step {self.step_k})")
-            return None
         if held_ns is not None and stamp < held_ns:
             return None
         return stamp
@@ -532,7 +535,8 @@ class PlantNode(Node):
             "state": state, "completed": completed, "reason": reason, "steps": self.step_k,
             "sim_time_s": self.step_k * self.dt_ns * 1e-9, "scenario": self.scenario.name,
             "mode": self.params.config.mode,
-            "rejected_commands": self.reject_log.count, "wall_time_s": wall,
+            "rejected_commands": self.health.counts.get(REJECTED_COMMAND, 0),
+            "wall_time_s": wall,
             "startup_wait_s": startup, "late_commands": self.late_commands,
             "safe_hold_steps": self.safe_hold_steps, "overruns": self.overruns,
         }
