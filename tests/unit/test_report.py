@@ -329,3 +329,22 @@ def test_tables_6_and_7_carry_the_margins_of_their_controllers():
                                                       "Linearised loop at 90"]
     for ln in lines:
         assert all(f"{c} ρ " in ln for c in ("mpc_fws", "mpc_4ws", "improved"))
+
+
+def test_a_run_whose_node_died_ranks_last_and_breaks_no_table():
+    """A died run's metrics carry no scores; ranking them raised KeyError after every run
+    of ``fourws paper`` had finished, and report.md was never written."""
+    from fourws_bringup.paper import rank
+
+    m = {"a": {"completed": True, "max_abs_lateral_error_m": 0.2},
+         "dead": {"completed": False, "reason": "mpc_node died", "sim_time_s": None},
+         "b": {"completed": True, "max_abs_lateral_error_m": 0.1},
+         "spun": {"completed": False, "sim_time_s": 4.0, "max_abs_lateral_error_m": 3.0}}
+    assert rank(m, "max_abs_lateral_error_m") == ["b", "a", "spun", "dead"]
+
+
+def test_paper_only_with_an_unknown_run_is_refused(tmp_path):
+    from fourws_bringup.paper import run_paper
+
+    with pytest.raises(ValueError, match="imporved@dlc_60_mu05"):
+        run_paper(tmp_path / "out", only=["imporved@dlc_60_mu05"])

@@ -66,7 +66,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     try:
         return run_paper(Path(args.out), force=args.force, only=args.only,
                          compose=args.compose, conditions=tuple(args.conditions), seed=args.seed)
-    except RunError as exc:
+    except (RunError, ValueError) as exc:
         print(f"fourws paper: {exc}", file=sys.stderr)
         return 2
 

@@ -95,7 +95,9 @@ def rank(metrics: dict[str, dict], key: str) -> list[str]:
     def order(c: str):
         m = metrics[c]
         done = bool(m.get("completed"))
-        return (0, m[key]) if done else (1, -float(m.get("sim_time_s", 0.0)), m[key])
+        v = m.get(key)              # a run whose node died has no scores: it ranks last
+        v = float(v) if isinstance(v, int | float) else math.inf
+        return (0, v) if done else (1, -float(m.get("sim_time_s") or 0.0), v)
     return sorted(metrics, key=order)
 
 
@@ -265,6 +267,11 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
                     + ", CONTROLLER@SCENARIO[@WORLD]/ run folders)")
     runs = [(c, s, w) for w in conditions for c, s in PAPER_RUNS]
     if only:
+        known = {f"{c}@{s}" for c, s in PAPER_RUNS}
+        unknown = sorted(set(only) - known)
+        if unknown:                      # a typo ran nothing and exited 0
+            raise ValueError(f"--only: {unknown} not among the paper's runs "
+                             f"({', '.join(sorted(known))})")
         runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
     results: dict[str, dict[tuple[str, str], dict]] = {w: {} for w in conditions}
     t_start = time.monotonic()

@@ -38,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import os
 import re
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -463,7 +464,12 @@ def write_presets(spec: TuningSpec, chosen: Mapping[str, Mapping[str, float]],
             if new != text:
                 differ.append(str(path))
                 if not check:
-                    path.write_text(new, encoding="utf-8")
+                    tmp = path.with_name(path.name + ".tmp")   # a full disk never
+                    try:                                         # truncates a preset
+                        tmp.write_text(new, encoding="utf-8")
+                        os.replace(tmp, path)
+                    finally:
+                        tmp.unlink(missing_ok=True)
     return differ
 
 
