@@ -173,3 +173,34 @@ def test_a_runs_nearest_points_are_computed_once_and_give_the_same_metrics():
                         s["sideslip"], log.solve_ms)
     assert {k: log.metrics()[k] for k in plain} == plain
     assert limit_metrics(log, B, R, nearest=log.nearest) == limit_metrics(log, B, R)
+
+
+def test_a_wider_car_is_checked_at_its_own_width():
+    """The cones and the lane rule take the course's car width (its scenario's
+    ``vehicle_width_m``), not a fixed 1.5 m: a wider course's car reaching the same offset
+    hits a cone the 1.5 m body would not."""
+    from fourws_bringup.core.limit_metrics import lane_free_m
+
+    lanes = ((0.0, 10.0, 0.0, 2.5),)
+    x, y = np.linspace(0.0, 9.0, 10), np.full(10, 0.4)
+    assert cone_excess(lanes, x, y) == 0.0                          # 0.4 + 0.75 < 1.25
+    assert cone_excess(lanes, x, y, 1.8) == pytest.approx(0.05)     # 0.4 + 0.9 − 1.25
+    assert lane_free_m(1.5) == pytest.approx(LANE_FREE_M) == pytest.approx(0.275)
+    y = np.zeros(50)
+    y[10] = 0.29                                  # beyond 1.5 m's 0.275, within 1.8 m's 0.305
+    wide = _log(y, np.zeros(50))
+    assert limit_metrics(wide, B, R)["lane_violation"]
+    wide.vehicle_width_m = 1.8
+    assert not limit_metrics(wide, B, R)["lane_violation"]
+    course = iso3888_2(speed_mps=10.0, vehicle_width_m=1.8)
+    assert course.vehicle_width_m == 1.8 and course.lanes == tuple(iso3888_2_lanes(1.8))
+
+
+def test_a_run_that_ended_at_once_keeps_its_reason():
+    """A run aborted before its first step raised in the metrics (a reshape of nothing), and
+    the sweep's row said 'raised' instead of the abort."""
+    log = _log(np.zeros(0), np.zeros(0), reason="aborted: lateral error 5.0 m")
+    log.state["mu"] = np.zeros((0, 4))
+    m = limit_metrics(log, B, R)
+    assert m["lane_violation"] and not m["completed_clean"] and not m["spin"]
+    assert math.isnan(m["demand_mug"]) and math.isnan(m["braking_distance_m"])

@@ -133,7 +133,8 @@ def _file_record(what: str, path: Path) -> dict[str, str]:
             f"{what}_sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
-def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str, Any]:
+def limit_record(run: RunData, metrics: Mapping, lanes: tuple = (),
+                 vehicle_width_m: float | None = None) -> dict[str, Any]:
     """The limit metrics (``core.limit_metrics``) of a recorded run, on its true states and
     the commands of the steps that have all three (yaw moment, drive and wheel torques);
     B and R are the recorded controller's allocator's; a metric that does not apply is
@@ -161,6 +162,7 @@ def limit_record(run: RunData, metrics: Mapping, lanes: tuple = ()) -> dict[str,
     log = SimpleNamespace(
         state=s, reference=ref, reason=str(metrics.get("reason", "")),
         completed=bool(metrics.get("completed")), lanes=lanes,
+        **({} if vehicle_width_m is None else {"vehicle_width_m": vehicle_width_m}),
         mpc={"yaw_moment": at(run.mpc_command, "yaw_moment")},
         wheel_torque_cmd_nm=at(run.wheel_torques, "torque").reshape(-1, 4),
         drive_torque_nm=at(run.drive_command, "torque"))

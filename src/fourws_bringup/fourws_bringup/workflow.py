@@ -74,7 +74,7 @@ def run_and_score(scenario: str, controller: str, out_dir: Path, *, force: bool 
     try:
         run = read_run(out_dir)  # once, for the metrics and the figures
         metrics = score_run(out_dir, outcome, scenario=sc.name, controller=controller, run=run)
-        metrics.update(limit_record(run, metrics, sc.path.lanes))
+        metrics.update(limit_record(run, metrics, sc.path.lanes, sc.path.vehicle_width_m))
     except Exception as exc:  # noqa: BLE001 - the run's own record must still be written
         metrics = {"scenario": sc.name, "controller": controller, "completed": False,
                    "reason": f"{outcome.reason}; metrics failed: {exc}",

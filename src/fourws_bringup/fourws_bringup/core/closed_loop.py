@@ -45,6 +45,7 @@ from fourws_common.path_lookup import SpeedProfile
 from fourws_mpc.core.controller import VehicleSample
 from fourws_mpc.core.laws import make_controller
 from fourws_mpc.core.reference import Reference
+from fourws_sim.core.paths import VEHICLE_WIDTH_M
 from fourws_sim.core.scenario import AbortLimits, load_scenario
 from fourws_sim.core.sensing import sensors_from_params
 from fourws_sim.core.simulator import Simulator
@@ -82,6 +83,8 @@ class ClosedLoopLog:
     summary: str = ""
     #: the scenario path's cone lanes (``ReferencePath.lanes``), for the limit metrics
     lanes: tuple = ()
+    #: the body width the lanes are checked against (``ReferencePath.vehicle_width_m``)
+    vehicle_width_m: float = VEHICLE_WIDTH_M
 
     @property
     def steps(self) -> int:
@@ -186,5 +189,6 @@ def run_closed_loop(
         wheel_torque_cmd_nm=np.array(wcmd).reshape(-1, 4), solve_ms=np.array(solve),
         completed=bool(done and not reason.startswith("aborted")), reason=reason,
         summary=scenario.summary(), lanes=scenario.path.lanes,
+        vehicle_width_m=scenario.path.vehicle_width_m,
     )
     return log

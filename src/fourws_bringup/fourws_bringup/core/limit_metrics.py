@@ -31,15 +31,22 @@ import numpy as np
 
 from fourws_bringup.core.metrics import path_nearest
 from fourws_common.wheels import Wheel
+from fourws_sim.core.paths import VEHICLE_WIDTH_M
 
 #: a run spins when |β| reaches this (deg): beyond the ~5-7° where a car's rear saturates,
 #: where a driver has lost the car (stated criterion of the bench)
 SPIN_SIDESLIP_DEG = 10.0
-#: car width (m) of the lane rule and the cone check
-VEHICLE_WIDTH_M = 1.5
-#: free half-width of the ISO 3888-1 side lane (1.2 w + 0.25) for that car (m)
-LANE_FREE_M = (1.2 * VEHICLE_WIDTH_M + 0.25 - VEHICLE_WIDTH_M) / 2.0
 G = 9.81
+
+
+def lane_free_m(vehicle_width_m: float = VEHICLE_WIDTH_M) -> float:
+    """Free half-width (m) of the ISO 3888-1 side lane, 1.2 w + 0.25, for a car of width w:
+    the lane rule where a course has no cones (0.275 m for the default 1.5 m)."""
+    return (1.2 * vehicle_width_m + 0.25 - vehicle_width_m) / 2.0
+
+
+#: the lane rule of the default car (m)
+LANE_FREE_M = lane_free_m()
 
 
 def delivered_yaw_moment(torque_nm: np.ndarray, track_m: float, radius_m: float
@@ -50,10 +57,11 @@ def delivered_yaw_moment(torque_nm: np.ndarray, track_m: float, radius_m: float
                                          + t[:, Wheel.RR] - t[:, Wheel.RL])
 
 
-def cone_excess(lanes: tuple, x: np.ndarray, y: np.ndarray) -> float:
+def cone_excess(lanes: tuple, x: np.ndarray, y: np.ndarray,
+                vehicle_width_m: float = VEHICLE_WIDTH_M) -> float:
     """The largest distance (m, ≥ 0) the body's width reaches beyond a lane's cones
     (module docstring); 0 without lanes."""
-    half = np.full(np.shape(x), 0.5 * VEHICLE_WIDTH_M)
+    half = np.full(np.shape(x), 0.5 * vehicle_width_m)
     worst = 0.0
     for x0, x1, yc, width in lanes:
         inside = (x >= x0) & (x <= x1)
@@ -82,7 +90,8 @@ def limit_metrics(log: Any, track_m: float, radius_m: float,
     log's ``metrics.path_nearest`` when the caller has it)."""
     s, ref = log.state, log.reference
     vx = np.asarray(s["vx"], float)
-    mu = np.mean(np.asarray(s["mu"], float).reshape(len(vx), -1), axis=1)
+    mu_w = np.asarray(s["mu"], float)          # (n, 4); a run that ended at once has none
+    mu = np.mean(mu_w.reshape(len(vx), -1), axis=1) if len(vx) else np.zeros(0)
     beta = np.degrees(np.abs(np.asarray(s["sideslip"], float)))
     r = np.abs(np.asarray(s["yaw_rate"], float))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -101,8 +110,10 @@ def limit_metrics(log: Any, track_m: float, radius_m: float,
     max_beta = float(np.max(beta)) if len(beta) else math.nan
     spin = bool(max_beta >= SPIN_SIDESLIP_DEG or "sideslip" in str(log.reason))
     xs, ys = (np.asarray(s[k], float) for k in ("x", "y"))
-    cones = cone_excess(tuple(log.lanes), xs, ys) if log.lanes else math.nan
-    lane = (cones > 0.0 if log.lanes else bool(len(e_y) and float(np.max(e_y)) > LANE_FREE_M)
+    width = float(getattr(log, "vehicle_width_m", VEHICLE_WIDTH_M))   # the course's car
+    cones = cone_excess(tuple(log.lanes), xs, ys, width) if log.lanes else math.nan
+    lane = (cones > 0.0 if log.lanes else bool(len(e_y) and float(np.max(e_y))
+                                                > lane_free_m(width))
             ) or "lateral" in str(log.reason)
 
     def peak(a: np.ndarray) -> float:

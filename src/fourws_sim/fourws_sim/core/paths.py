@@ -77,6 +77,9 @@ TANH_DLC_DEFAULTS = {
 }
 
 
+#: the body width of a course's lanes when a scenario names none (m)
+VEHICLE_WIDTH_M = 1.5
+
 @dataclass(frozen=True, eq=False)
 class ReferencePath:
     """A sampled reference path; every array has shape (N,)."""
@@ -90,6 +93,8 @@ class ReferencePath:
     speed: np.ndarray  # m/s
     #: the cone lanes of a test course, (x_from, x_to, y_centre, width) in m; empty if none
     lanes: tuple = ()
+    #: the body width the lanes are set out for and checked against (m)
+    vehicle_width_m: float = VEHICLE_WIDTH_M
 
     def __post_init__(self) -> None:
         n = len(self.x)
@@ -141,7 +146,7 @@ def tanh_dlc_settled_x(stretch: float = 1.0, **geometry: float) -> float:
 
 
 def iso3888_steepness(
-    vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5, cone_margin_m: float = 0.0
+    vehicle_width_m: float = VEHICLE_WIDTH_M, lane_offset_m: float = 3.5, cone_margin_m: float = 0.0
 ) -> tuple[float, float, float, float]:
     """(X_c1, k1, X_c2, k2) of the two tanh steps of the ISO 3888-1 centre line (m, 1/m):
     each k the smallest that keeps the car's body ``cone_margin_m`` inside the cones at the
@@ -174,7 +179,8 @@ def iso3888_steepness(
     return xc1, k1, xc2, k2
 
 
-def iso3888_lanes(vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5) -> list[tuple]:
+def iso3888_lanes(vehicle_width_m: float = VEHICLE_WIDTH_M, lane_offset_m: float = 3.5
+                  ) -> list[tuple]:
     """[(x_from, x_to, y_centre, width)] of the cone lanes of ISO 3888-1 (sections 1, 3, 5,
     6), m."""
     lengths = ISO3888_SECTIONS_M
@@ -190,7 +196,7 @@ def iso3888_lanes(vehicle_width_m: float = 1.5, lane_offset_m: float = 3.5) -> l
 ISO3888_2_SECTIONS_M = (12.0, 13.5, 11.0, 12.5, 12.0)
 
 
-def iso3888_2_lanes(vehicle_width_m: float = 1.5) -> list[tuple]:
+def iso3888_2_lanes(vehicle_width_m: float = VEHICLE_WIDTH_M) -> list[tuple]:
     """[(x_from, x_to, y_centre, width)] of the three cone lanes of ISO 3888-2, m."""
     w = vehicle_width_m
     starts = np.concatenate(([0.0], np.cumsum(ISO3888_2_SECTIONS_M)))
@@ -251,7 +257,7 @@ def fit_steepness(fits: Callable[[int, list[float]], bool], n_steps: int) -> lis
 
 def iso3888_2(
     speed_mps: float,
-    vehicle_width_m: float = 1.5,
+    vehicle_width_m: float = VEHICLE_WIDTH_M,
     cone_margin_m: float = 0.0,
     x_start_m: float = DEFAULT_X_START_M,
     x_end_m: float | None = None,
@@ -275,7 +281,7 @@ def iso3888_2(
         ypp += -h * k * k * t * sech2
     path = _graph_path("iso3888_2", x, y, yp, ypp,
                        _speed_array(x, speed_mps, speed_profile_kmh))
-    return dataclasses.replace(path, lanes=tuple(lanes))
+    return dataclasses.replace(path, lanes=tuple(lanes), vehicle_width_m=vehicle_width_m)
 
 
 def _smoothstep(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -358,7 +364,7 @@ def tanh_dlc(
 
 def iso3888(
     speed_mps: float,
-    vehicle_width_m: float = 1.5,
+    vehicle_width_m: float = VEHICLE_WIDTH_M,
     lane_offset_m: float = 3.5,
     cone_margin_m: float = 0.0,
     x_start_m: float = DEFAULT_X_START_M,
@@ -378,8 +384,8 @@ def iso3888(
     yp = h2 * (k1 * s1 - k2 * s2)
     ypp = h2 * (-2.0 * k1 * k1 * t1 * s1 + 2.0 * k2 * k2 * t2 * s2)
     path = _graph_path("iso3888", x, y, yp, ypp, _speed_array(x, speed_mps, speed_profile_kmh))
-    return dataclasses.replace(path, lanes=tuple(iso3888_lanes(vehicle_width_m,
-                                                                 lane_offset_m)))
+    return dataclasses.replace(path, lanes=tuple(iso3888_lanes(vehicle_width_m, lane_offset_m)),
+                               vehicle_width_m=vehicle_width_m)
 
 
 def sine(
