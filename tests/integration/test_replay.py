@@ -235,3 +235,21 @@ def test_fourws_replay_as_fast_as_possible_ends_normally(domain_id):
         r = subprocess.run(["fourws", "replay", str(bag), "--rate", "0", "--domain-id",
                             str(domain_id)], capture_output=True, text=True, timeout=300)
         assert r.returncode == 0 and "died" not in r.stderr, r.stderr[-2000:]
+
+
+def test_a_runtime_parameter_set_is_refused_not_silently_ignored(graph, ros, tmp_path):
+    """A replay reads its parameters at start; ``ros2 param set /replay_node rate 5`` was
+    answered successful and changed nothing."""
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    write_bag(tmp_path / "bag", 200)
+    sup = graph([replay(tmp_path / "bag", rate=0.5)])
+    cli = ros.node.create_client(SetParameters, "/replay_node/set_parameters")
+    assert ros.spin_until(cli.service_is_ready, 30.0)
+    fut = cli.call_async(SetParameters.Request(
+        parameters=[Parameter("rate", value=5.0).to_parameter_msg()]))
+    assert ros.spin_until(fut.done, 30.0)
+    res = fut.result().results[0]
+    assert not res.successful and "read at start" in res.reason, res
+    wait_done(sup, ros)

@@ -220,6 +220,11 @@ def message_class(type_name: str):
         raise ValueError(f"topics: message type {type_name} is not installed") from exc
 
 
+#: the recorder's parameters read at start only (a runtime set is refused, naming them)
+START_ONLY = ("topics", "output_dir", "chunk_size_bytes", "chunk_max_span_s", "compression",
+              "start_gate_topic", "start_gate_settle_s", "start_gate_timeout_s")
+
+
 class RecorderNode(Node):
     """Subscribes serialized, writes the bag; all storage logic is in fourws_bringup.bag."""
 
@@ -339,9 +344,7 @@ class RecorderNode(Node):
         from rcl_interfaces.msg import SetParametersResult
 
         names = [p.name for p in params]
-        if any(n in ("topics", "output_dir", "chunk_size_bytes", "compression",
-                     "start_gate_topic", "start_gate_settle_s", "start_gate_timeout_s")
-               for n in names):
+        if any(n in START_ONLY for n in names):
             return SetParametersResult(successful=False, reason="recorder parameters "
                                        f"{names} apply at start only")
         return SetParametersResult(successful=True)

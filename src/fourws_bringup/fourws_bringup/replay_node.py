@@ -103,7 +103,7 @@ class ReplayNode(Node):
         super().__init__("replay_node")
         self.done = False
         self.exit_code = 0
-        self.params = ParamBinding(self, ReplayConfig)
+        self.params = ParamBinding(self, ReplayConfig, on_change=self._fixed)
         cfg = self.cfg = self.params.config
         topics_param = self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
                                               ParameterDescriptor(description=(
@@ -182,6 +182,12 @@ class ReplayNode(Node):
             f"replaying {self.bag.path} ({', '.join(self.topics)}) at rate {cfg.rate} "
             f"({cfg.pacing}){'; lockstep on ' + cfg.lockstep_topic if self.lockstep else ''}")
 
+    @staticmethod
+    def _fixed(_cfg: ReplayConfig) -> None:
+        """A runtime set is refused: a replay reads its parameters at start (a changed rate
+        or pacing was accepted and never applied)."""
+        raise ValueError("replay parameters are read at start: start another replay")
+
     # -- lockstep ----------------------------------------------------------------------------
     def _on_answer(self, data: bytes) -> None:
         stamp = cdr_stamp_ns(data)
@@ -215,6 +221,7 @@ class ReplayNode(Node):
                     f"no {self.cfg.lockstep_topic} stamped {stamp} ns within "
                     f"{self.cfg.lockstep_timeout_s:.1f} s; going on")
             self._waiting = None
+            self.answered = {a for a in self.answered if a >= stamp}  # a repeat of it may follow
         for _ in range(BATCH):
             if self._next is None:
                 self._next = next(self._messages, None)
