@@ -364,6 +364,13 @@ def test_recover_of_a_bare_mcap_still_writes_file_recovered_beside_it(tmp_path, 
     assert read_run(fixed).steps > 0 and bare.is_file()
     with pytest.raises(Exception):  # noqa: B017 - the cut file itself is left as it was
         read_run(bare)
+    # a second recovery never overwrites the first without --force
+    before = fixed.read_bytes()
+    assert cli.main(["bag", "recover", str(bare)]) == 2
+    assert "--force" in capsys.readouterr().err and fixed.read_bytes() == before
+    assert cli.main(["bag", "recover", str(bare), "--force"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag", "cut.mcap",
+                                                          "cut_recovered.mcap"]  # no .tmp
 
 
 def test_metrics_name_the_scenario_file_and_its_content_hash(tmp_path):

@@ -107,6 +107,10 @@ def _cmd_bag(args: argparse.Namespace) -> int:
                       f"the truncated file is kept as {r.kept_aside}")
             return 0
         dst = Path(args.out) if args.out else src.with_name(src.stem + "_recovered.mcap")
+        if dst.exists() and not args.force:          # never over a file without being told
+            print(f"fourws bag recover: {dst} exists; use --force to overwrite it",
+                  file=sys.stderr)
+            return 2
         n = recover(src, dst)
     except (BagError, FileNotFoundError) as exc:
         print(f"fourws bag recover: {exc}", file=sys.stderr)
@@ -257,6 +261,8 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--out", help="write the recovered file here instead and leave the bag "
                                    "as it is (default for a bare .mcap: FILE_recovered.mcap "
                                    "beside it)")
+    rec.add_argument("--force", action="store_true", help="overwrite an existing --out file "
+                     "(or FILE_recovered.mcap)")
     rec.set_defaults(func=_cmd_bag)
 
     g = sub.add_parser("margins", help="stability margins of the linearised lateral loop "

@@ -43,7 +43,6 @@ def recover(src: str | Path, dst: str | Path, *, compression: str = "zstd",
         Schema,
     )
     from mcap.stream_reader import StreamReader
-    from mcap.writer import Writer
 
     src_path = resolve_mcap(src)
     dst_path = Path(dst)
@@ -79,6 +78,20 @@ def recover(src: str | Path, dst: str | Path, *, compression: str = "zstd",
             elif isinstance(rec, DataEnd | Footer):
                 break
     tmp = dst_path.with_name(dst_path.name + ".tmp")
+    try:
+        count = _write(tmp, header, schemas, channels, kept, chunk_size_bytes, compression)
+        os.replace(tmp, dst_path)
+    finally:
+        tmp.unlink(missing_ok=True)      # a full disk leaves no half file behind
+    return count
+
+
+def _write(tmp: Path, header, schemas: dict, channels: dict, kept: list,
+           chunk_size_bytes: int, compression: str) -> int:
+    """The kept records into a new MCAP file ``tmp``; the messages written."""
+    from mcap.records import Attachment, Message, Metadata
+    from mcap.writer import Writer
+
     count = 0
     with open(tmp, "wb") as out:
         w = Writer(out, chunk_size=chunk_size_bytes, compression=compression_type(compression))
@@ -102,7 +115,6 @@ def recover(src: str | Path, dst: str | Path, *, compression: str = "zstd",
                 w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
                                  rec.data)
         w.finish()
-    os.replace(tmp, dst_path)
     return count
 
 
