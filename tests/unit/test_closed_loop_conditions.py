@@ -96,7 +96,11 @@ def test_a_bad_value_is_refused_naming_its_key(raw, key):
 
 
 def test_an_integer_written_as_a_float_is_the_integer():
-    assert condition_from_mapping({"delay_periods": 2.0, "seed": 3.0}).delay_periods == 2
+    c = condition_from_mapping({"delay_periods": 2.0, "seed": 3.0})
+    assert (c.delay_periods, c.seed) == (2, 3)
+    for key in ("delay_periods", "seed"):           # .inf raised OverflowError, a traceback
+        with pytest.raises(ValueError, match=key):
+            condition_from_mapping({key: float("inf")})
 
 
 def test_the_margins_refuse_a_negative_dead_time():

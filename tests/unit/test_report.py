@@ -331,7 +331,7 @@ def test_tables_6_and_7_carry_the_margins_of_their_controllers():
         assert all(f"{c} ρ " in ln for c in ("mpc_fws", "mpc_4ws", "improved"))
 
 
-def test_a_run_whose_node_died_ranks_last_and_breaks_no_table():
+def test_a_run_whose_node_died_ranks_last():
     """A died run's metrics carry no scores; ranking them raised KeyError after every run
     of ``fourws paper`` had finished, and report.md was never written."""
     from fourws_bringup.paper import rank
@@ -348,3 +348,4 @@ def test_paper_only_with_an_unknown_run_is_refused(tmp_path):
 
     with pytest.raises(ValueError, match="imporved@dlc_60_mu05"):
         run_paper(tmp_path / "out", only=["imporved@dlc_60_mu05"])
+    assert not (tmp_path / "out").exists()          # refused before anything is made

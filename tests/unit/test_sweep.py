@@ -2,6 +2,7 @@
 parallel path gives the same rows as the serial one."""
 
 import csv
+from concurrent.futures.process import BrokenProcessPool
 
 import pytest
 
@@ -248,7 +249,7 @@ def test_an_existing_folder_is_refused_and_force_replaces_only_a_sweep(tmp_path,
 
 
 @pytest.mark.parametrize(("exc", "code"), [(KeyboardInterrupt(), 130),
-                                           (RuntimeError("a worker died"), 1)])
+                                           (BrokenProcessPool("a worker died"), 1)])
 def test_an_interrupted_sweep_keeps_the_rows_it_finished(tmp_path, monkeypatch, capsys, exc,
                                                          code):
     import json

@@ -15,10 +15,11 @@ nominal vehicle of ``vehicle_file``. All conversion is in
 Matching (``sync``): ``exact`` publishes a state once the three messages of one stamp have
 arrived (a simulator that stamps them alike, as fourws's plant does); ``latest`` publishes
 on every odometry message with the newest IMU and joint messages, each at most
-``max_age_s`` older than it (a real car's sensors). An input that is not finite, or joints
-that lack a configured name, are rejected, counted and logged (``/diagnostics``); nothing
-is published for them. ``wait_for_subscribers``: drop states until ``vehicle/state`` has that
-many subscribers (lockstep with a recorder: the plant publishes a waiting state again).
+``max_age_s`` older (or newer) than it (a real car's sensors). An input that is not finite
+or implausible, or joints that lack a configured name, are rejected, counted and logged
+(``/diagnostics``); nothing is published for them. ``wait_for_subscribers``: drop states
+until ``vehicle/state`` has that many subscribers (lockstep with a recorder: the plant
+publishes a waiting state again).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class AdapterConfig:
                       "have arrived; latest: on each odometry, with the newest IMU and joints",
                       choices=("exact", "latest"))
     max_age_s: float = param(0.05, "latest: the IMU and joint messages may be at most this "
-                             "much older than the odometry", lo=0.0, hi=10.0, unit="s")
+                             "much older (or newer) than the odometry", lo=0.0, hi=10.0, unit="s")
     yaw_rate_source: str = param("imu", "where the yaw rate comes from",
                                  choices=("imu", "odom"))
     steer_front_joints: tuple = param(list(STEER_JOINTS[:1]), "JointState names of the front "

@@ -261,17 +261,17 @@ def run_paper(out: Path, *, force: bool = False, only: list[str] | None = None,
     folders kept. Any other non-empty folder is refused. ``seed``: the realistic world's
     noise seed.
     """
+    known = {f"{c}@{s}" for c, s in PAPER_RUNS}
+    unknown = sorted(set(only or ()) - known)
+    if unknown:                          # a typo ran nothing and exited 0
+        raise ValueError(f"--only: {unknown} not among the paper's runs "
+                         f"({', '.join(sorted(known))})")
     conds = {w: paper_condition(w, seed) for w in conditions}
     prepare_out_dir(out, force, problem=paper_folder_problem, replace=False,
                     what="fourws paper output (" + ", ".join(PAPER_FOLDER_ENTRIES)
                     + ", CONTROLLER@SCENARIO[@WORLD]/ run folders)")
     runs = [(c, s, w) for w in conditions for c, s in PAPER_RUNS]
     if only:
-        known = {f"{c}@{s}" for c, s in PAPER_RUNS}
-        unknown = sorted(set(only) - known)
-        if unknown:                      # a typo ran nothing and exited 0
-            raise ValueError(f"--only: {unknown} not among the paper's runs "
-                             f"({', '.join(sorted(known))})")
         runs = [r for r in runs if f"{r[0]}@{r[1]}" in only]
     results: dict[str, dict[tuple[str, str], dict]] = {w: {} for w in conditions}
     t_start = time.monotonic()

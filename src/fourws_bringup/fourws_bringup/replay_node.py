@@ -30,7 +30,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
@@ -109,6 +109,7 @@ class ReplayNode(Node):
                                               ParameterDescriptor(description=(
                                                   "topics to replay (unset: every recorded "
                                                   "topic but /clock and /run/status)"))).value
+        self.add_on_set_parameters_callback(self._keep_topics)
         try:
             self.bag = McapBag(cfg.bag)
         except BagError as exc:
@@ -181,6 +182,14 @@ class ReplayNode(Node):
         self.get_logger().info(
             f"replaying {self.bag.path} ({', '.join(self.topics)}) at rate {cfg.rate} "
             f"({cfg.pacing}){'; lockstep on ' + cfg.lockstep_topic if self.lockstep else ''}")
+
+    @staticmethod
+    def _keep_topics(params: list[Parameter]) -> SetParametersResult:
+        """``topics`` too is read at start."""
+        if any(p.name == "topics" for p in params):
+            return SetParametersResult(successful=False, reason="replay parameters are read "
+                                       "at start: start another replay")
+        return SetParametersResult(successful=True)
 
     @staticmethod
     def _fixed(_cfg: ReplayConfig) -> None:

@@ -36,6 +36,13 @@ from .runner import RunOutcome
 DEADLINE_MS = 10.0
 
 
+#: the reason of a bag without the plant's final /run/status (the plant died mid-run)
+NO_STATUS = "no /run/status in the bag"
+#: what the live run knew of its outcome that such a bag cannot give
+LIVE_OUTCOME = ("completed", "reason", "exit_code", "wall_time_s", "scenario", "died",
+                "died_error")
+
+
 def recorded_reference(run: RunData) -> Reference | None:
     """The run's recorded reference path as a ``fourws_mpc`` Reference, or None."""
     r = run.reference
@@ -214,7 +221,7 @@ def score_run(path: Path, outcome: RunOutcome | None = None, scenario: str | Non
         out["exit_code"] = int(outcome.code)
     else:
         out["completed"] = bool(status.get("completed", False))
-        out["reason"] = str(status.get("reason", "no /run/status in the bag"))
+        out["reason"] = str(status.get("reason", NO_STATUS))
         code = status.get("exit_code")
         out["exit_code"] = int(code) if isinstance(code, int) else (
             0 if out["completed"] else None)

@@ -1,7 +1,8 @@
 """Runs controllers × scenarios × conditions × seeds in the in-process loop, in parallel.
 
-``fourws sweep SPEC.yaml --out DIR [--workers N | --scheduler ADDRESS]`` (docs/bench.md,
-"Sweeps"): one CSV row per run and a summary.
+``fourws sweep SPEC.yaml --out DIR [--force] [--workers N | --scheduler ADDRESS]``
+(docs/bench.md, "Sweeps"): one CSV row per run and a summary; an existing folder needs
+``--force``.
 
 Where one machine is not enough, ``--scheduler tcp://HOST:8786`` runs the same jobs on a
 `Dask distributed <https://distributed.dask.org>`_ cluster (``dask scheduler`` on one host,
@@ -240,9 +241,13 @@ def run_sweep(jobs: list[Job], workers: int = 1, progress: bool = True,
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             futures = {pool.submit(run_job, job): i for i, job in enumerate(jobs)}
-            for fut in as_completed(futures):
-                rows[futures[fut]] = fut.result()
-                _progress(progress, len(rows), len(jobs))
+            try:
+                for fut in as_completed(futures):
+                    rows[futures[fut]] = fut.result()
+                    _progress(progress, len(rows), len(jobs))
+            except BaseException:         # a lost worker, Ctrl-C, a full journal: stop now,
+                pool.shutdown(wait=False, cancel_futures=True)   # not after every job
+                raise
     return [rows[i] for i in range(len(jobs))]
 
 
@@ -367,7 +372,7 @@ def summary_markdown(rows: list[dict[str, Any]], jobs: list[Job]) -> str:
 #: the rows of a sweep as they finish, one JSON object a line, until results.csv is written
 JOURNAL = "rows.partial.jsonl"
 #: what a sweep writes in its folder (``--force`` replaces only such a folder)
-SWEEP_FOLDER_ENTRIES = ("results.csv", "summary.md", JOURNAL)
+SWEEP_FOLDER_ENTRIES = ("results.csv", "summary.md", JOURNAL, "results.csv.tmp")
 
 
 def sweep_folder_problem(path: Path) -> str | None:
@@ -385,7 +390,7 @@ def sweep_cli(spec: str, out: str, workers: int, scheduler: str | None = None,
     try:
         jobs = load_spec(spec)
         out_dir = Path(out)
-        prepare_out_dir(out_dir, force, problem=sweep_folder_problem,
+        prepare_out_dir(out_dir, force, problem=sweep_folder_problem, replace=False,
                         what="fourws sweep folder (" + ", ".join(SWEEP_FOLDER_ENTRIES) + ")")
         out_dir.mkdir(parents=True, exist_ok=True)
         journal = (out_dir / JOURNAL).open("w", encoding="utf-8")
@@ -401,23 +406,28 @@ def sweep_cli(spec: str, out: str, workers: int, scheduler: str | None = None,
         done += 1
 
     kept = f"the {{}} finished rows of {len(jobs)} are kept in {out_dir / JOURNAL}"
+
+    def failed(text: str, code: int) -> int:
+        journal.close()
+        if not done:                      # nothing to keep: the folder as it was
+            (out_dir / JOURNAL).unlink(missing_ok=True)
+            print(f"fourws sweep: {text}", file=sys.stderr)
+        else:
+            print(f"fourws sweep: {text}; {kept.format(done)}", file=sys.stderr)
+        return code
+
     with journal:
         try:
             rows = run_sweep(jobs, workers, scheduler=scheduler,
                              connect_timeout_s=connect_timeout_s, on_row=keep)
         except KeyboardInterrupt:
-            print(f"\nfourws sweep: interrupted; {kept.format(done)}", file=sys.stderr)
-            return 130
+            return failed("interrupted", 130)
         except OSError as exc:  # no scheduler at that address, or the journal's disk
             if scheduler and not done:
-                print(f"fourws sweep: scheduler {scheduler}: {exc}", file=sys.stderr)
-                return 2
-            print(f"fourws sweep: {exc}; {kept.format(done)}", file=sys.stderr)
-            return 1
+                return failed(f"scheduler {scheduler}: {exc}", 2)
+            return failed(str(exc), 1)
         except Exception as exc:  # noqa: BLE001 - a worker killed: what finished is kept
-            print(f"fourws sweep: {type(exc).__name__}: {exc}; {kept.format(done)}",
-                  file=sys.stderr)
-            return 1
+            return failed(f"{type(exc).__name__}: {exc}", 1)
     try:
         write_csv(rows, out_dir / "results.csv")
         (out_dir / "summary.md").write_text(

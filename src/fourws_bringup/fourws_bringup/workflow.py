@@ -148,18 +148,25 @@ def report_path(path: Path, out: Path | None = None) -> dict:
     from .bag.run_data import read_run
     from .outputs import writable_dir
     from .report import draw_figures
-    from .scoring import score_run, write_metrics
+    from .scoring import LIVE_OUTCOME, NO_STATUS, score_run, write_metrics
 
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such bag or run folder")
-    out = out or (path if (path / "bag").is_dir() else path.parent)
+    folder = path if (path / "bag").is_dir() else path.parent     # the run's own folder
+    out = out or folder
     writable_dir(out)
-    kept: dict = {}
+    live: dict = {}
     try:
-        kept = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+        live = json.loads((folder / "metrics.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        pass                                      # none yet, or unreadable: scores alone
-    metrics = {**(kept if isinstance(kept, dict) else {}), **score_run(path)}
+        pass                                      # none, or unreadable: the scores alone
+    live = live if isinstance(live, dict) else {}
+    score = score_run(path)
+    # the bag's scores win; the live record fills what the bag cannot give, and the outcome
+    # too when the bag has no final status (a plant that died: the live run knew why)
+    no_status = str(score.get("reason", "")).startswith(NO_STATUS)
+    metrics = {**score, **{k: v for k, v in live.items()
+                           if k not in score or (no_status and k in LIVE_OUTCOME)}}
     write_metrics(out, metrics)
     try:
         draw_figures(read_run(path), out / "plots")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from fourws_common.params import param
 from fourws_sim.core.localisation import LOCALISATION_METHODS
-from fourws_sim.core.sensing import CHANNELS, TYRE_SOURCES
+from fourws_sim.core.sensing import CHANNELS, MAX_SEED, TYRE_SOURCES
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class PlantNodeConfig:
     noise_tau_s: tuple = param([0.0] * len(CHANNELS), "Gauss-Markov correlation time per "
                                "channel (0: white)", lo=0.0, hi=1.0e4, unit="s")
     noise_seed: int = param(0, "seed of the measurement noise (a seed reproduces a run)",
-                            lo=0, hi=2**31 - 1)
+                            lo=0, hi=MAX_SEED)
     delay_periods: int = param(0, "computation delay: a command answering the state of step "
                                "k acts from step k + N", lo=0, hi=100)
     steer_dead_time_s: float = param(0.0, "steering dead time before the actuator lag",
@@ -68,7 +68,7 @@ class PlantNodeConfig:
                               "state; ekf, a localisation filter that knows the noise's "
                               "models (core.localisation)", choices=LOCALISATION_METHODS)
     vehicle_file: str = param("", "car file: a name in fourws_common/config/vehicles or a "
-                              "path; empty: the paper's car (applies to the next run)")
+                              "path; empty: the paper's car (read at start)")
     vehicle_overrides: str = param("", "plant overrides over the scenario's vehicle, a YAML "
                                    "mapping of car-file fields (e.g. a slower steering "
                                    "actuator); empty: none")

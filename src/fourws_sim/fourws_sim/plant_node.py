@@ -103,7 +103,7 @@ START_CHECK_PERIOD_S = 0.01
 REJECTED_COMMAND = "rejected_command"
 
 #: the parameters the run is built from at start (the others apply from the next step)
-START_ONLY = ("scenario", "mode", "dt_s", "substep_s", "republish_period_s", "status_period_s",
+START_ONLY = ("scenario", "mode", "dt_s", "substep_s", "status_period_s", "path_pose_spacing_m",
               "noise_sigma", "noise_tau_s", "noise_seed", "delay_periods", "steer_dead_time_s",
               "tyre_forces", "localisation", "vehicle_file", "vehicle_overrides",
               "publish_ground_truth", "publish_standard_sensors")

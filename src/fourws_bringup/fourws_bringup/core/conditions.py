@@ -18,6 +18,7 @@ parameters.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -123,7 +124,8 @@ def condition_from_mapping(d: Mapping[str, Any], seed: int | None = None) -> Con
 
 def _integer(v: Any, name: str) -> int:
     """An integer as YAML gives it (``2``, or ``2.0``); ``ValueError`` for 1.9, true or text."""
-    if isinstance(v, bool) or not isinstance(v, int | float) or v != v or v != int(v):
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or \
+            v != int(v):
         raise ValueError(f"{name}: expected an integer, got {v!r}")
     return int(v)
 

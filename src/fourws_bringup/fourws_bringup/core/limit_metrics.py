@@ -7,13 +7,14 @@ car at each step::
     max_abs_sideslip_deg (metrics.py), yaw_rate_ratio = max |r| / (μ g / v_x)
     spin                = |β| ≥ SPIN_SIDESLIP_DEG at any step, or an abort on sideslip
     cone_excess_m       = on a cone course (``ReferencePath.lanes``), the largest distance
-                          by which the body's width (VEHICLE_WIDTH_M, centred on the CG)
+                          by which the body's width (the course's ``vehicle_width_m``, 1.5 m
+                          on the shipped courses; centred on the CG)
                           reaches beyond a lane's edge while the CG is within the lane's X
                           range. The yawed footprint is not checked: the courses' centre
                           lines are built for the width alone (``paths.cone_steepness``)
     lane_violation      = cone_excess_m > 0 on a cone course; elsewhere max |e_Y| >
-                          LANE_FREE_M (the free half-width of the ISO 3888-1 side lane for a
-                          1.5 m car: (1.2 w + 0.25 − w)/2)
+                          lane_free_m(w) (the free half-width of the ISO 3888-1 side lane
+                          for a car of width w: (1.2 w + 0.25 − w)/2, 0.275 m at 1.5 m)
     speed_error_max_mps = max |v_x − v_ref|, v_ref the path speed at the nearest sample
     unmet_fx_max_n      = max |T_total − Σ T_i| / R          (drive force demanded − delivered)
     unmet_mz_max_nm     = max |M_z − (B/2R)(T_FR − T_FL + T_RR − T_RL)|   (yaw moment likewise)
