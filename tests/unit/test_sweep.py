@@ -283,3 +283,17 @@ def test_a_failed_csv_write_leaves_the_old_file_whole(tmp_path, monkeypatch):
         write_csv(rows[:1], path)
     assert path.read_text(encoding="utf-8") == before
     assert [p.name for p in tmp_path.iterdir()] == ["results.csv"]
+
+
+def test_a_sweep_that_fails_before_its_first_row_leaves_the_folder_retryable(tmp_path,
+                                                                            monkeypatch):
+    from fourws_bringup.sweep import JOURNAL, sweep_cli
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SPEC, encoding="utf-8")
+    out = tmp_path / "out"
+    _fake_rows(monkeypatch, 0, KeyboardInterrupt())
+    assert sweep_cli(str(spec), str(out), 1) == 130
+    assert not (out / JOURNAL).exists() and not any(out.iterdir())
+    _fake_rows(monkeypatch, 99, RuntimeError())
+    assert sweep_cli(str(spec), str(out), 1) == 0          # the retry needs no --force
