@@ -110,10 +110,10 @@ def test_the_adapter_rejects_what_it_cannot_use_and_never_publishes_nan(graph, r
         assert all(math.isfinite(getattr(m, k)) for k in ("x", "y", "yaw", "vx", "vy"))
 
 
-def test_latest_sync_rejects_a_stale_imu(graph, ros):
-    graph([NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
-                    params_files=[str(config_dir("fourws_bringup") / "adapter.yaml")],
-                    parameters={"sync": "latest", "max_age_s": 0.05})])
+
+def _latest_adapter_io(ros):
+    """The states the adapter publishes (by stamp), its /diagnostics counts, and publishers
+    of odometry, IMU and joint states matched to it."""
     states: dict[int, VehicleState] = {}
     counts: dict[str, int] = {}
     ros.node.create_subscription(VehicleState, "/vehicle/state",
@@ -127,6 +127,14 @@ def test_latest_sync_rejects_a_stale_imu(graph, ros):
     pubs = [ros.node.create_publisher(cls, topic, CONTROL_QOS) for cls, topic in (
         (Odometry, "/vehicle/odom"), (Imu, "/vehicle/imu"), (JointState, "/vehicle/joint_states"))]
     assert ros.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0)
+    return states, counts, pubs
+
+
+def test_latest_sync_rejects_a_stale_imu(graph, ros):
+    graph([NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
+                    params_files=[str(config_dir("fourws_bringup") / "adapter.yaml")],
+                    parameters={"sync": "latest", "max_age_s": 0.05})])
+    states, counts, pubs = _latest_adapter_io(ros)
     odom, imu, joints = _inputs(0)
     pubs[1].publish(imu)
     pubs[2].publish(joints)
@@ -145,19 +153,7 @@ def test_latest_sync_rejects_an_imu_stamped_ahead_of_the_odometry(graph, ros):
     graph([NodeSpec("adapter_node", "fourws_bringup", "adapter_node",
                     params_files=[str(config_dir("fourws_bringup") / "adapter.yaml")],
                     parameters={"sync": "latest", "max_age_s": 0.05})])
-    states: dict[int, VehicleState] = {}
-    counts: dict[str, int] = {}
-    ros.node.create_subscription(VehicleState, "/vehicle/state",
-                                 lambda m: states.setdefault(stamp_to_ns(m.header.stamp), m),
-                                 CONTROL_QOS)
-    ros.node.create_subscription(
-        DiagnosticArray, "/diagnostics",
-        lambda msg: [counts.update({kv.key: int(kv.value) for kv in st.values})
-                     for st in msg.status if st.name.endswith("adapter_node")],
-        DIAGNOSTICS_QOS)
-    pubs = [ros.node.create_publisher(cls, topic, CONTROL_QOS) for cls, topic in (
-        (Odometry, "/vehicle/odom"), (Imu, "/vehicle/imu"), (JointState, "/vehicle/joint_states"))]
-    assert ros.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0)
+    states, counts, pubs = _latest_adapter_io(ros)
     pubs[1].publish(_inputs(100)[1])                             # 1 s ahead of the odometry
     pubs[2].publish(_inputs(0)[2])
     assert ros.spin_until(lambda: all(p.wait_for_all_acked(Duration(seconds=0))

@@ -85,11 +85,10 @@ def test_speed_pid_node_answers_each_state_with_its_stamp_and_the_core_value(gra
     assert all(math.isfinite(c.force) and math.isfinite(c.torque) for c in got.values())
 
 
-@pytest.mark.parametrize("method", ["optimal", "rule"])
-def test_allocator_node_combines_three_stamped_inputs(graph, ros, method):
-    graph([NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
-                    params_files=[str(CFG / "allocator.yaml")],
-                    parameters={"method": method})])
+
+def _allocator_io(ros):
+    """The allocator's answers by stamp, and publishers of its three inputs (s, d, m)
+    matched to it."""
     got: dict[int, WheelTorques] = {}
     ros.node.create_subscription(WheelTorques, "/control/wheel_torques",
                                  lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m),
@@ -98,6 +97,15 @@ def test_allocator_node_combines_three_stamped_inputs(graph, ros, method):
         ("s", VehicleState, "/vehicle/state"), ("d", DriveCommand, "/control/drive_command"),
         ("m", MpcCommand, "/control/mpc_command"))}
     assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    return got, pubs
+
+
+@pytest.mark.parametrize("method", ["optimal", "rule"])
+def test_allocator_node_combines_three_stamped_inputs(graph, ros, method):
+    graph([NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
+                    params_files=[str(CFG / "allocator.yaml")],
+                    parameters={"method": method})])
+    got, pubs = _allocator_io(ros)
     cfg = from_mapping(AllocatorConfig, {**load_ros_params_yaml(str(CFG / "allocator.yaml"),
                                                                 "allocator_node"),
                                          "method": method})
@@ -146,14 +154,7 @@ def test_allocator_strays_from_the_future_never_crowd_out_the_current_step(graph
 
     graph([NodeSpec("allocator_node", "fourws_torque_alloc", "allocator_node",
                     params_files=[str(CFG / "allocator.yaml")])])
-    got: dict[int, WheelTorques] = {}
-    ros.node.create_subscription(WheelTorques, "/control/wheel_torques",
-                                 lambda m: got.setdefault(stamp_to_ns(m.header.stamp), m),
-                                 CONTROL_QOS)
-    pubs = {t: ros.node.create_publisher(c, n, CONTROL_QOS) for t, c, n in (
-        ("s", VehicleState, "/vehicle/state"), ("d", DriveCommand, "/control/drive_command"),
-        ("m", MpcCommand, "/control/mpc_command"))}
-    assert ros.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+    got, pubs = _allocator_io(ros)
 
     def step(k: int) -> None:
         d, m = DriveCommand(force=100.0, torque=27.0), MpcCommand(yaw_moment=10.0)
