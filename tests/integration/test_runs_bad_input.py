@@ -121,6 +121,10 @@ def test_a_full_disk_exits_1_naming_it_and_the_bag_recovers_up_to_the_failure(tm
     r = subprocess.run(["fourws", "bag", "recover", str(kept)], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0, r.stderr
+    # what the complete chunks held comes back, from the first step and without a hole. How
+    # many steps that is depends on where the disk filled: the filler can fill it while the
+    # second chunk is still being written (a loaded run once kept only the 3 states of the
+    # first chunk, behind the reference), so the count is not asserted
     states = read_run(kept).state["stamp_ns"]
-    assert len(states) > 50                                      # the chunks on disk
-    assert set(np.diff(states)) == {10_000_000}                  # from the start, no hole
+    assert len(states) >= 1 and states[0] == 0, states[:3]
+    assert len(states) == 1 or set(np.diff(states)) == {10_000_000}
