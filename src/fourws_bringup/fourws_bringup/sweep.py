@@ -121,16 +121,14 @@ def _product(controllers, scenarios, conditions: Mapping, seeds: list, where: st
              ) -> list[Job]:
     jobs = []
     for name, raw in conditions.items():
-        try:
+        try:                        # every seed checked, whether the condition draws noise
             raw = condition_mapping(raw)
-            base = condition_from_mapping({**raw, "name": str(name)})
-            for seed in seeds:      # each checked once, whether the condition draws noise
-                condition_from_mapping({**raw, "name": str(name)}, seed=seed)
+            by_seed = [condition_from_mapping({**raw, "name": str(name)}, seed=seed)
+                       for seed in seeds]
         except ValueError as exc:
             raise ValueError(f"{where}: conditions.{name}: {exc}") from None
-        noisy = any(s.sigma > 0.0 for s in base.noise.values())
-        for seed in (seeds if noisy else seeds[:1]):
-            cond = condition_from_mapping({**raw, "name": str(name)}, seed=seed)
+        noisy = any(s.sigma > 0.0 for s in by_seed[0].noise.values())
+        for cond in (by_seed if noisy else by_seed[:1]):
             for c in controllers:
                 for s in scenarios:
                     jobs.append(Job(str(c), str(s), cond))
